@@ -1,0 +1,36 @@
+# augnet: `make run` starts the main job, `make test` runs every test.
+# Both create .venv when missing and install what the project needs, Debian packages included.
+
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+SUDO   := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+# Debian packages the tests drive: RTKLIB (convbin, rnx2rtkp, str2str, rtkrcv) and curl.
+DEBS   := rtklib curl
+DEB_CHECK := command -v rnx2rtkp >/dev/null && command -v convbin >/dev/null && command -v str2str >/dev/null && command -v curl >/dev/null
+
+.PHONY: run test bench debs venv clean
+
+run: venv
+	$(VENV)/bin/augnet run
+
+test: venv debs
+	$(PY) -m pytest -q
+
+bench: venv debs
+	$(VENV)/bin/augnet bench all
+
+venv: $(STAMP)
+
+$(STAMP): pyproject.toml
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV) || { $(SUDO) apt-get update -q && $(SUDO) apt-get install -y -q python3-venv && $(PYTHON) -m venv $(VENV); }
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e '.[test]'
+	@touch $(STAMP)
+
+debs:
+	@$(DEB_CHECK) || { $(SUDO) apt-get update -q && DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -q $(DEBS); }
+
+clean:
+	rm -rf $(VENV) build *.egg-info .pytest_cache .hypothesis

@@ -1,0 +1,3 @@
+from augnet.cli import main
+
+main()

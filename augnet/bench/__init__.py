@@ -1,0 +1,1 @@
+"""Benchmarks: each prints figures and a ratio against a named peer, measured side by side in one run."""

@@ -1,0 +1,1 @@
+"""augnet.bus (see ../shared/design/architecture.md)."""

@@ -1,0 +1,1 @@
+"""augnet.centre (see ../shared/design/architecture.md)."""

@@ -1,0 +1,59 @@
+"""augnet: the one front door (`augnet up`, `augnet sim ...`, `augnet bench ...`, ...).
+
+Each subsystem owns its own typer app in its own module; this file only mounts them, importing each
+lazily so a missing optional part never breaks the others.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+import typer
+
+app = typer.Typer(help="augnet: track-side GNSS augmentation network.", no_args_is_help=True,
+                  add_completion=False)
+
+# (command name, module, attribute, help). A module that does not exist yet is simply not mounted.
+SUBAPPS = (
+    ("bench", "augnet.bench.cli", "app", "Benchmarks against named peers (prints figures and ratios)."),
+    ("caster", "ntrip_caster.cli", "app", "NTRIP caster (v1 and v2)."),
+    ("loadtest", "ntrip_caster.loadtest", "app", "NTRIP load generator."),
+    ("sim", "stations.cli", "sim_app", "Simulated world: record scenarios."),
+    ("stations", "stations.cli", "stations_app", "Stream simulated stations to a caster."),
+    ("rssp1", "rssp1.cli", "app", "RSSP-I safety layer tools."),
+)
+
+
+def _mount() -> None:
+    for name, module, attr, help_text in SUBAPPS:
+        try:
+            mod = importlib.import_module(module)
+        except ModuleNotFoundError as exc:
+            if exc.name and (exc.name == module or module.startswith(exc.name + ".")):
+                continue
+            raise
+        sub = getattr(mod, attr, None)
+        if sub is not None:
+            app.add_typer(sub, name=name, help=help_text)
+
+
+@app.command()
+def run() -> None:
+    """The main job on its embedded defaults (what `make run` starts).
+
+    Until the whole system (`augnet up`) lands, this runs the real pieces that exist: the RTCM codec
+    benchmark against pyrtcm.
+    """
+    from augnet.bench import cli as bench_cli
+
+    bench_cli.run_all()
+
+
+def main() -> None:
+    _mount()
+    app()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""augnet.console (see ../shared/design/architecture.md)."""

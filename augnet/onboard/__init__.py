@@ -1,0 +1,1 @@
+"""augnet.onboard (see ../shared/design/architecture.md)."""

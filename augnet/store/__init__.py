@@ -1,0 +1,1 @@
+"""augnet.store (see ../shared/design/architecture.md)."""

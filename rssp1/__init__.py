@@ -1,0 +1,1 @@
+"""RSSP-I railway signal safety protocol: sans-IO core and thin UDP/TCP transports."""

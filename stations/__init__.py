@@ -1,0 +1,1 @@
+"""Simulated world: truth orbits, clocks, atmosphere, receivers (reference stations and trains)."""

@@ -1,0 +1,26 @@
+"""Shared fixtures: where the real recordings live, and skips with a reason when tools are absent."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+SHARED_DATA = REPO_ROOT.parent / "shared" / "data"
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    """../shared/data (real recordings by others); skip when absent, never copied into the repo."""
+    if not SHARED_DATA.is_dir():
+        pytest.skip(f"real recordings not available: {SHARED_DATA} is absent")
+    return SHARED_DATA
+
+
+def require_tool(name: str) -> str:
+    path = shutil.which(name)
+    if path is None:
+        pytest.skip(f"{name} not installed (make test installs RTKLIB and curl with apt-get)")
+    return path
