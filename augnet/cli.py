@@ -25,7 +25,15 @@ SUBAPPS = (
 )
 
 
+_mounted = False
+
+
 def _mount() -> None:
+    """Mount every subsystem's app once (idempotent: tests call it too)."""
+    global _mounted
+    if _mounted:
+        return
+    _mounted = True
     for name, module, attr, help_text in SUBAPPS:
         try:
             mod = importlib.import_module(module)
