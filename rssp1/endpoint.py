@@ -1,0 +1,260 @@
+"""The sans-IO RSSP-I endpoint: one device's end of one link, driven once per main cycle.
+
+    ep = Endpoint(local, peer, timing)
+    events = ep.receive(datagram)          # any time between cycles, once per frame received
+    frames, events = ep.cycle(data)        # once per main cycle: watchdogs, then the frames to send
+
+No sockets, no clocks: the caller owns both (rssp1.transport is one such caller, tests are others).
+Both directions live here: our RSDs to the peer (own TC, own timestamps) and the peer's RSDs to us
+(synchronised by our SSE and its SSR).
+
+Receive rules (rssp1.md "Synchronisation and freshness"), in the order applied to an RSD:
+
+1. CRC16, length, type                  -> dropped, counted `crc16`/`length`/...   (corruption)
+2. source / destination addresses      -> dropped, `address`                        (insertion)
+3. not synchronised                     -> dropped, `unsynchronised`; an SSE goes out
+4. TC <= last accepted TC               -> dropped silently, `repeat`                (repetition,
+                                                                                      re-sequencing)
+5. both safety check words (SVC) against the timestamps predicted from the SSR
+                                        -> dropped, `svc`                            (corruption past
+                                                                                      CRC16, wrong SID
+                                                                                      or DATAVER)
+6. TC gap >= deltaTime                  -> link down, `gap`; SSE                      (deletion)
+7. TC older than our estimate of the sender's TC by >= deltaTime
+                                        -> dropped, `late`                           (delay)
+8. otherwise accepted; the first accepted RSD after an SSR brings the link up.
+
+The SVC check runs before the gap rule so that only a frame that proves it comes from the peer can
+take the link down. A local watchdog drops the link after DelayTime cycles in a row without an
+accepted RSD (`timeout`), which also catches a stream that is entirely late or that never verifies
+(wrong SID or DATAVER). At most one SSE leaves per lifeTime cycles; an SSR counts only when it echoes
+the TC of our last SSE and arrives less than lifeTime cycles after it.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections import Counter
+from dataclasses import dataclass
+
+from rssp1 import checkword
+from rssp1.config import DeviceConfig, LinkTiming
+from rssp1.frames import (
+    CATEGORY_ACTIVE,
+    NUM_DATAVER,
+    TYPE_RSD_A,
+    TYPE_RSD_B,
+    FrameError,
+    Rsd,
+    Sse,
+    Ssr,
+    decode_frame,
+    encode_rsd,
+    encode_sse,
+    encode_ssr,
+)
+from rssp1.timestamp import TIMESTAMP_CH1, TIMESTAMP_CH2
+
+TC_MODULUS = 1 << 32  # TC is a u32 on the wire
+
+
+class LinkState(enum.Enum):
+    DOWN = "down"  # not synchronised: RSDs are dropped, SSEs go out
+    SYNCING = "syncing"  # SSR accepted, waiting for the first RSD that verifies
+    UP = "up"
+
+
+@dataclass(frozen=True, slots=True)
+class DataReceived:
+    data: bytes
+    tc: int
+    machine: str  # "A" or "B"
+
+
+@dataclass(frozen=True, slots=True)
+class LinkUp:
+    cycle: int
+
+
+@dataclass(frozen=True, slots=True)
+class LinkDown:
+    reason: str
+    cycle: int
+
+
+@dataclass(frozen=True, slots=True)
+class FrameDropped:
+    reason: str
+
+
+Event = DataReceived | LinkUp | LinkDown | FrameDropped
+
+
+class Endpoint:
+    """One end of an RSSP-I link. See the module docstring for the rules."""
+
+    def __init__(
+        self,
+        local: DeviceConfig,
+        peer: DeviceConfig,
+        timing: LinkTiming | None = None,
+        *,
+        initial_tc: int = 0,
+        machine: int = TYPE_RSD_A,
+        category: int = CATEGORY_ACTIVE,
+    ) -> None:
+        if machine not in (TYPE_RSD_A, TYPE_RSD_B):
+            raise ValueError("machine must be TYPE_RSD_A or TYPE_RSD_B")
+        self.local = local
+        self.peer = peer
+        self.timing = timing or LinkTiming()
+        self.machine = machine
+        self.category = category
+        self.stats: Counter[str] = Counter()
+        # Sending side: our TC and timestamps (T(0) = SINIT).
+        self.tc = initial_tc % TC_MODULUS
+        seed = local.timestamp_seed
+        self._t = (TIMESTAMP_CH1.advance(seed[0], self.tc), TIMESTAMP_CH2.advance(seed[1], self.tc))
+        self._pending_sse: tuple[int, tuple[int, int]] | None = None  # (TC_E, SEQENQ) to answer
+        # Receiving side.
+        self.state = LinkState.DOWN
+        self.local_cycle = -1  # index of the last cycle run
+        self._sse_tc_e: int | None = None
+        self._sse_seqenq: tuple[int, int] = (0, 0)
+        self._sse_cycle = 0
+        self._last_tc = 0  # last accepted TC (or TC_R - 1 right after an SSR)
+        self._last_t: tuple[int, int] = (0, 0)  # peer timestamps at _last_tc + _t_offset
+        self._t_offset = 0  # 1 right after an SSR: _last_t is T(_last_tc + 1) = T(TC_R)
+        self._anchor_tc = 0  # our estimate of the peer's TC: _anchor_tc + (local_cycle - _anchor_cycle)
+        self._anchor_cycle = 0
+        self._missed_cycles = 0
+        self._good_since_tick = False
+
+    # ----------------------------------------------------------------- receiving
+    def receive(self, frame: bytes | bytearray | memoryview) -> list[Event]:
+        """Process one received frame. Never raises on bad input: it is counted and dropped."""
+        self.stats["rx_frames"] += 1
+        try:
+            decoded = decode_frame(frame)
+        except FrameError as exc:
+            return self._drop(exc.reason)
+        if decoded.source != self.peer.address or decoded.destination != self.local.address:
+            return self._drop("address")
+        if isinstance(decoded, Rsd):
+            return self._receive_rsd(decoded)
+        if isinstance(decoded, Sse):
+            self.stats["rx_sse"] += 1
+            self._pending_sse = (decoded.tc_e, decoded.seqenq)
+            return []
+        return self._receive_ssr(decoded)
+
+    def _drop(self, reason: str) -> list[Event]:
+        self.stats[f"dropped_{reason}"] += 1
+        return [FrameDropped(reason)]
+
+    def _receive_ssr(self, ssr: Ssr) -> list[Event]:
+        self.stats["rx_ssr"] += 1
+        if self._sse_tc_e is None or ssr.tc_e != self._sse_tc_e:
+            return self._drop("ssr_unexpected")
+        if self.local_cycle - self._sse_cycle >= self.timing.life_time:
+            return self._drop("ssr_stale")
+        if ssr.num_dataver != NUM_DATAVER:
+            return self._drop("ssr_num_dataver")
+        t_r = checkword.timestamp_from_ssr(ssr.seqini, self._sse_seqenq, self.peer.sid, self.peer.dataver)
+        self._sse_tc_e = None
+        self._last_tc = (ssr.tc_r - 1) % TC_MODULUS
+        self._last_t = t_r
+        self._t_offset = 1
+        self._anchor_tc = ssr.tc_r
+        self._anchor_cycle = self.local_cycle
+        self._missed_cycles = 0
+        self.state = LinkState.SYNCING
+        self.stats["ssr_accepted"] += 1
+        return []
+
+    def _receive_rsd(self, rsd: Rsd) -> list[Event]:
+        if self.state is LinkState.DOWN:
+            return self._drop("unsynchronised")
+        gap = (rsd.tc - self._last_tc) % TC_MODULUS
+        if gap == 0 or gap >= TC_MODULUS // 2:  # not newer (u32 serial-number arithmetic)
+            return self._drop("repeat")
+        steps = gap - self._t_offset
+        t1 = TIMESTAMP_CH1.advance(self._last_t[0], steps)
+        t2 = TIMESTAMP_CH2.advance(self._last_t[1], steps)
+        if checkword.timestamp_from_svc(rsd.svc, rsd.data, self.peer.sid) != (t1, t2):
+            return self._drop("svc")
+        if gap >= self.timing.delta_time:
+            self.stats["dropped_gap"] += 1
+            return [FrameDropped("gap"), *self._link_down("gap")]
+        estimate = (self._anchor_tc + (self.local_cycle - self._anchor_cycle)) % TC_MODULUS
+        lag = (estimate - rsd.tc) % TC_MODULUS
+        if lag < TC_MODULUS // 2:
+            if lag >= self.timing.delta_time:
+                return self._drop("late")
+        else:  # the peer runs ahead of our estimate (its clock is a little faster): follow it
+            self._anchor_tc, self._anchor_cycle = rsd.tc, self.local_cycle
+        self._last_tc, self._last_t, self._t_offset = rsd.tc, (t1, t2), 0
+        self._good_since_tick = True
+        self.stats["rx_rsd_ok"] += 1
+        events: list[Event] = []
+        if self.state is LinkState.SYNCING:
+            self.state = LinkState.UP
+            self.stats["link_up"] += 1
+            events.append(LinkUp(self.local_cycle))
+        events.append(DataReceived(rsd.data, rsd.tc, rsd.machine))
+        return events
+
+    def _link_down(self, reason: str) -> list[Event]:
+        was_up = self.state is not LinkState.DOWN
+        self.state = LinkState.DOWN
+        self._missed_cycles = 0
+        if not was_up:
+            return []
+        self.stats["link_down"] += 1
+        self.stats[f"link_down_{reason}"] += 1
+        return [LinkDown(reason, self.local_cycle)]
+
+    # ------------------------------------------------------------------- cycling
+    def cycle(self, data: bytes | None = None) -> tuple[list[bytes], list[Event]]:
+        """Run one main cycle: receive watchdogs, then build this cycle's frames (SSR, SSE, RSD).
+
+        `data` is this cycle's user data (None: no RSD this cycle; TC advances anyway).
+        """
+        self.local_cycle += 1
+        events: list[Event] = []
+        if self.state is not LinkState.DOWN:
+            if self._good_since_tick:
+                self._missed_cycles = 0
+            else:
+                self._missed_cycles += 1
+                if self._missed_cycles >= self.timing.delay_time:
+                    events.extend(self._link_down("timeout"))
+        self._good_since_tick = False
+
+        frames: list[bytes] = []
+        src, dst = self.local.address, self.peer.address
+        if self._pending_sse is not None:
+            tc_e, enq = self._pending_sse
+            self._pending_sse = None
+            ini = checkword.seqini(enq, self.local.sid, self.local.dataver, self._t)
+            frames.append(encode_ssr(src, dst, self.tc, tc_e, ini, category=self.category))
+            self.stats["tx_ssr"] += 1
+        if self.state is LinkState.DOWN and (
+            self._sse_tc_e is None or self.local_cycle - self._sse_cycle >= self.timing.life_time
+        ):
+            self._sse_tc_e = self.tc
+            self._sse_seqenq = checkword.seqenq(self.local.sid, self._t)
+            self._sse_cycle = self.local_cycle
+            frames.append(encode_sse(src, dst, self.tc, self._sse_seqenq, category=self.category))
+            self.stats["tx_sse"] += 1
+        if data is not None:
+            words = checkword.svc(data, self.local.sid, self._t)
+            frames.append(encode_rsd(src, dst, self.tc, words, data, msg_type=self.machine, category=self.category))
+            self.stats["tx_rsd"] += 1
+        self.tc = (self.tc + 1) % TC_MODULUS
+        self._t = (TIMESTAMP_CH1.step(self._t[0]), TIMESTAMP_CH2.step(self._t[1]))
+        return frames, events
+
+    @property
+    def is_up(self) -> bool:
+        return self.state is LinkState.UP
