@@ -1,0 +1,55 @@
+"""`python -m rssp1 ...` (later also `augnet rssp1 ...`): capture inspection and SID recovery."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from rssp1.inspect import RSSP1_UDP_PORTS, format_report, inspect_captures, parse_device
+
+app = typer.Typer(no_args_is_help=True, help="RSSP-I safety layer tools.")
+
+
+@app.command()
+def inspect(
+    files: List[Path] = typer.Argument(..., help="pcapng (or pcap) captures", exists=True, dir_okay=False),
+    device: Optional[List[str]] = typer.Option(
+        None, "--device", help="ADDR:SID1,SID2[:SINIT1,SINIT2] of a sender whose check words to verify"
+    ),
+    port: Optional[List[int]] = typer.Option(None, "--port", help="UDP ports carrying RSSP-I (default 50000, 50001)"),
+    all_udp: bool = typer.Option(False, "--all-udp", help="look for RSSP-I frames in every UDP datagram"),
+    recover: bool = typer.Option(
+        False, "--recover-sids", help="solve unknown senders' SIDs from two frames and verify the rest with them"
+    ),
+) -> None:
+    """Per source: frames seen, CRC16 passed, safety check words passed."""
+    try:
+        devices = [parse_device(d) for d in device or []]
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--device") from exc
+    try:
+        report = inspect_captures(
+            list(files), devices, ports=tuple(port) if port else RSSP1_UDP_PORTS, all_udp=all_udp, recover=recover
+        )
+    except ValueError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2) from exc
+    typer.echo(format_report(report))
+
+
+@app.command()
+def version() -> None:
+    """Print the protocol constants this build uses."""
+    from rssp1.checkword import SYS_CHK_WD
+    from rssp1.crc import CRC16_CHECK, CRC32_CH1_CHECK, CRC32_CH2_CHECK
+
+    typer.echo(
+        f"RSSP-I: CRC16 check {CRC16_CHECK:#06x}, CRC32 checks {CRC32_CH1_CHECK:#010x}/{CRC32_CH2_CHECK:#010x}, "
+        f"SYS_CHK_WD {SYS_CHK_WD[0]:#010x}/{SYS_CHK_WD[1]:#010x}"
+    )
+
+
+def main() -> None:
+    app()
