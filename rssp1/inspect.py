@@ -139,8 +139,9 @@ def format_report(report: CaptureReport) -> str:
     ]
     for s in report.sources.values():
         sid = "-" if s.sid is None else f"{s.sid[0]:#010x},{s.sid[1]:#010x}" + (" (recovered)" if s.sid_recovered else "")
+        address = f"0x{s.source:04x}"
         lines.append(
-            f"{"0x%04x" % s.source:>8} {s.frames:7d} {s.rsd:5d} {s.sse:4d} {s.ssr:4d} {s.crc16_passed:9d} {s.svc_passed:7d} "
+            f"{address:>8} {s.frames:7d} {s.rsd:5d} {s.sse:4d} {s.ssr:4d} {s.crc16_passed:9d} {s.svc_passed:7d} "
             f"{s.svc_failed:7d} {s.svc_not_checked:9d}  {sid}"
         )
     lines.append(f"RSD frames: {report.rsd_total}")
