@@ -1,0 +1,188 @@
+"""RTCM 3 transport layer: CRC-24Q, framing, and a sans-IO stream reader that survives bad input.
+
+Frame (RTCM 10403.3 section 4, Table 4-1):
+
+    0xD3 | 6 reserved bits (0) + 10-bit payload length | payload (0..1023 bytes) | CRC-24Q (3 bytes)
+
+The CRC covers preamble, length and payload. The reader never raises on input: garbage bytes,
+false preambles, bad CRCs and truncated frames are skipped and counted, and a frame split across
+``feed`` calls at any byte boundary is reassembled.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+PREAMBLE = 0xD3  # RTCM 10403.3 Table 4-1
+HEADER_BYTES = 3  # preamble + 6 reserved bits + 10-bit length
+CRC_BYTES = 3
+MAX_PAYLOAD_BYTES = 1023  # 10-bit length field
+FRAME_OVERHEAD_BYTES = HEADER_BYTES + CRC_BYTES
+
+# CRC-24Q generator polynomial (Qualcomm), RTCM 10403.3 section 4.2:
+# x^24 + x^23 + x^18 + x^17 + x^14 + x^11 + x^10 + x^7 + x^6 + x^5 + x^4 + x^3 + x + 1
+CRC24Q_POLY = 0x1864CFB
+CRC24Q_MASK = 0xFFFFFF
+
+
+def _crc24q_table() -> tuple[int, ...]:
+    table = []
+    for byte in range(256):
+        crc = byte << 16
+        for _ in range(8):
+            crc <<= 1
+            if crc & 0x1000000:
+                crc ^= CRC24Q_POLY
+        table.append(crc & CRC24Q_MASK)
+    return tuple(table)
+
+
+CRC24Q_TABLE: tuple[int, ...] = _crc24q_table()
+
+
+def crc24q(data: bytes, crc: int = 0) -> int:
+    """CRC-24Q of ``data`` (initial value 0, no final XOR), table driven."""
+    table = CRC24Q_TABLE
+    for b in data:
+        crc = ((crc << 8) & CRC24Q_MASK) ^ table[(crc >> 16) ^ b]
+    return crc
+
+
+class FramingError(ValueError):
+    """A payload cannot be framed (too long)."""
+
+
+def frame(payload: bytes) -> bytes:
+    """Wrap a message payload in an RTCM 3 frame: preamble, length, payload, CRC-24Q."""
+    n = len(payload)
+    if n > MAX_PAYLOAD_BYTES:
+        raise FramingError(f"RTCM payload of {n} bytes exceeds the 10-bit length limit of {MAX_PAYLOAD_BYTES}")
+    head = bytes((PREAMBLE, n >> 8, n & 0xFF)) + payload
+    return head + crc24q(head).to_bytes(3, "big")
+
+
+def message_type(payload: bytes) -> int:
+    """The 12-bit message number (DF002) at the start of a payload; 0 for a payload under 2 bytes."""
+    if len(payload) < 2:
+        return 0
+    return (payload[0] << 4) | (payload[1] >> 4)
+
+
+@dataclass(frozen=True, slots=True)
+class Frame:
+    """One CRC-checked RTCM 3 frame."""
+
+    msg_type: int  # DF002, 0 when the payload is shorter than 2 bytes
+    payload: bytes
+    raw: bytes  # the whole frame: header + payload + CRC
+
+
+@dataclass
+class StreamStats:
+    frames_ok: int = 0
+    crc_failures: int = 0  # candidate frames (preamble + sane length) whose CRC did not match
+    bytes_skipped: int = 0  # bytes discarded while hunting for a preamble (garbage, false preambles)
+    truncated_bytes: int = 0  # bytes of an incomplete frame (or garbage) left when the input ended
+    by_type: dict[int, int] = field(default_factory=dict)
+
+
+class RtcmStreamReader:
+    """Sans-IO RTCM 3 frame splitter: ``feed(bytes) -> list[Frame]``; never raises on input.
+
+    Resynchronisation: on a bad CRC we drop only the preamble byte and hunt again from the next byte,
+    so a real frame that starts inside a false candidate is still found. A candidate whose reserved
+    length bits are non-zero is not a frame (RTCM 10403.3 Table 4-1 requires them zero).
+    """
+
+    def __init__(self, max_buffer_bytes: int = 64 * 1024) -> None:
+        self._buf = bytearray()
+        self.stats = StreamStats()
+        # A frame is at most 1029 bytes, so anything beyond that in the buffer is already decided;
+        # the bound keeps memory flat when a caller feeds a huge block of garbage.
+        self._max_buffer = max(max_buffer_bytes, MAX_PAYLOAD_BYTES + FRAME_OVERHEAD_BYTES)
+
+    @property
+    def pending_bytes(self) -> int:
+        """Bytes held waiting for the rest of a frame (a partial frame at the end of the input)."""
+        return len(self._buf)
+
+    def feed(self, data: bytes) -> list[Frame]:
+        self._buf += data
+        out: list[Frame] = []
+        buf = self._buf
+        stats = self.stats
+        pos = 0
+        n = len(buf)
+        while True:
+            start = buf.find(PREAMBLE, pos)
+            if start < 0:
+                stats.bytes_skipped += n - pos
+                pos = n
+                break
+            stats.bytes_skipped += start - pos
+            pos = start
+            if n - pos < HEADER_BYTES:
+                break  # wait for the length bytes
+            if buf[pos + 1] & 0xFC:  # reserved bits set: not a frame header
+                stats.bytes_skipped += 1
+                pos += 1
+                continue
+            length = ((buf[pos + 1] & 0x03) << 8) | buf[pos + 2]
+            end = pos + HEADER_BYTES + length + CRC_BYTES
+            if end > n:
+                break  # partial frame: wait for more bytes
+            body_end = end - CRC_BYTES
+            if crc24q(buf[pos:body_end]) != int.from_bytes(buf[body_end:end], "big"):
+                stats.crc_failures += 1
+                stats.bytes_skipped += 1
+                pos += 1
+                continue
+            payload = bytes(buf[pos + HEADER_BYTES : body_end])
+            mt = message_type(payload)
+            out.append(Frame(mt, payload, bytes(buf[pos:end])))
+            stats.frames_ok += 1
+            stats.by_type[mt] = stats.by_type.get(mt, 0) + 1
+            pos = end
+        del buf[:pos]
+        if len(buf) > self._max_buffer:  # cannot happen with valid lengths; defensive bound
+            drop = len(buf) - self._max_buffer
+            stats.bytes_skipped += drop
+            del buf[:drop]
+        return out
+
+    def close(self) -> int:
+        """End of input: count what is left (a truncated frame) as truncated and return its size."""
+        left = len(self._buf)
+        self.stats.truncated_bytes += left
+        self._buf.clear()
+        return left
+
+
+@dataclass
+class FileFrames:
+    """All complete frames of a file, with the reader's counters and the size of any trailing partial frame."""
+
+    frames: list[Frame]
+    stats: StreamStats
+    truncated_tail_bytes: int
+
+
+def read_frames(path: str | Path, chunk_bytes: int = 65536) -> FileFrames:
+    """Split a whole file into frames; a partial frame at the end is reported, not raised."""
+    reader = RtcmStreamReader()
+    frames: list[Frame] = []
+    with open(path, "rb") as fh:
+        while chunk := fh.read(chunk_bytes):
+            frames.extend(reader.feed(chunk))
+    tail = reader.close()
+    return FileFrames(frames, reader.stats, tail)
+
+
+def iter_frames(path: str | Path, chunk_bytes: int = 65536) -> Iterator[Frame]:
+    """Yield the complete frames of a file one by one (streaming; partial tail silently dropped)."""
+    reader = RtcmStreamReader()
+    with open(path, "rb") as fh:
+        while chunk := fh.read(chunk_bytes):
+            yield from reader.feed(chunk)
