@@ -22,6 +22,10 @@ SUBAPPS = (
     ("sim", "stations.cli", "sim_app", "Simulated world: record scenarios."),
     ("stations", "stations.cli", "stations_app", "Stream simulated stations to a caster."),
     ("rssp1", "rssp1.cli", "app", "RSSP-I safety layer tools."),
+    ("rtk", "augnet.onboard.cli", "rtk", "Post-process RTK like rnx2rtkp: rover + base RINEX -> solution CSV."),
+    ("vrs", "augnet.centre.cli", "vrs", "Write a virtual reference station RINEX file for a point."),
+    ("centre", "augnet.centre.cli", "app", "The network engine (control centre)."),
+    ("console", "augnet.console.cli", "app", "The operator console."),
 )
 
 
@@ -42,8 +46,10 @@ def _mount() -> None:
                 continue
             raise
         sub = getattr(mod, attr, None)
-        if sub is not None:
+        if isinstance(sub, typer.Typer):
             app.add_typer(sub, name=name, help=help_text)
+        elif callable(sub):  # a single command, e.g. `augnet rtk --rover ...`
+            app.command(name=name, help=help_text)(sub)
 
 
 @app.command()
