@@ -40,7 +40,7 @@ def test_combinations_cancel_their_terms():
         # geometry-free phase gives back the ionosphere once the ambiguity term is known
         amb = N1 * C / F1 - N2 * C / f2
         np.testing.assert_allclose(cb.ionosphere_on_f1_m(L1, L2, F1, f2, amb), iono, atol=1e-6)
-        np.testing.assert_allclose(cb.geometry_free_code_m(P1, P2), ((F1 / f2) ** 2 - 1) * iono, rtol=1e-12)
+        np.testing.assert_allclose(cb.geometry_free_code_m(P1, P2), ((F1 / f2) ** 2 - 1) * iono, atol=1e-6)
 
 
 def test_geometry_free_slip_test():
