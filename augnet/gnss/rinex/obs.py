@@ -1,0 +1,547 @@
+"""RINEX observation files: RINEX 3.00-3.05 read, RINEX 3.04 write, RINEX 2.10/2.11 read.
+
+Array form (`ObsData`): `times` (E,) GPST seconds of the epochs, `sats` (S,) satellite ids, and
+for every observation type ('C1C', 'L1C', ... as in the header; RINEX 2 types such as 'C1', 'P2'
+as they are) a float (E, S) array with NaN where missing, plus LLI and signal-strength (SSI)
+digit arrays (E, S) of int8 (0 where blank).  A type is shared between systems ('C1C' of GPS and
+of Galileo live in one array; each satellite's column only holds its own system's types).
+
+Epoch flags (RINEX 3.04 Table A13): 0 OK, 1 power failure, 6 cycle-slip records are kept as
+epochs; 2-5 are event records whose following header lines are skipped (counted in `events`).
+Times: epochs in a GPS/GAL/QZS time-system file are GPST; in a BDT file they are shifted to GPST.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import math
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from augnet.gnss import time as gtime
+from augnet.gnss.rinex.errors import (
+    LABEL_COLUMN,
+    RinexError,
+    open_text_for_write,
+    parse_float,
+    parse_int,
+    read_lines,
+)
+
+WRITE_VERSION = 3.04
+OBS_FIELD_WIDTH = 16  # F14.3 value + I1 LLI + I1 SSI
+OBS_TYPES_PER_LINE_V3 = 13  # SYS / # / OBS TYPES
+OBS_TYPES_PER_LINE_V2 = 9  # # / TYPES OF OBSERV
+OBS_PER_LINE_V2 = 5
+SATS_PER_EPOCH_LINE_V2 = 12
+MAX_OBS_VALUE = 9_999_999_999.999  # largest value F14.3 holds
+KEPT_FLAGS = (0, 1, 6)
+SYSTEM_TIME_NAMES = {"G": "GPS", "E": "GAL", "C": "BDT", "J": "QZS", "R": "GLO", "M": "GPS", "S": "GPS", "I": "IRN"}
+
+
+@dataclass
+class ObsHeader:
+    version: float = WRITE_VERSION
+    system: str = "M"  # file's satellite system: 'M' mixed or a letter
+    program: str = "augnet"
+    run_by: str = ""
+    date: str = ""
+    marker_name: str = ""
+    marker_number: str = ""
+    marker_type: str = ""
+    observer: str = ""
+    agency: str = ""
+    receiver_number: str = ""
+    receiver_type: str = ""
+    receiver_version: str = ""
+    antenna_number: str = ""
+    antenna_type: str = ""
+    approx_position_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    antenna_delta_hen_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    obs_types: dict[str, list[str]] = field(default_factory=dict)  # system letter -> types
+    signal_strength_unit: str = ""
+    interval_s: float | None = None
+    time_of_first_obs: float | None = None  # GPST seconds
+    time_of_last_obs: float | None = None
+    time_system: str = "GPS"
+    leap_seconds: int | None = None
+    comments: list[str] = field(default_factory=list)
+    extra: list[tuple[str, str]] = field(default_factory=list)  # other header lines, verbatim
+
+
+@dataclass
+class ObsData:
+    header: ObsHeader
+    times: np.ndarray  # (E,) GPST seconds
+    flags: np.ndarray  # (E,) epoch flags
+    clock_offset_s: np.ndarray  # (E,) receiver clock offset from the epoch line, NaN if absent
+    sats: np.ndarray  # (S,) '<U3'
+    obs: dict[str, np.ndarray]  # type -> (E, S) float, NaN missing
+    lli: dict[str, np.ndarray]  # type -> (E, S) int8
+    ssi: dict[str, np.ndarray]  # type -> (E, S) int8
+    events: int = 0  # event records (flags 2-5) skipped
+
+    def sat_index(self, sat: str) -> int:
+        hits = np.flatnonzero(self.sats == sat)
+        if not len(hits):
+            raise KeyError(sat)
+        return int(hits[0])
+
+
+# --------------------------------------------------------------------------------------------
+# reading
+
+
+def read_obs(path: str | os.PathLike) -> ObsData:
+    """Read a RINEX 3.0x or 2.1x observation file (plain or gzip)."""
+    lines = read_lines(path)
+    if not lines:
+        raise RinexError(path, 1, "empty file")
+    if lines[0][LABEL_COLUMN:].strip() != "RINEX VERSION / TYPE":
+        raise RinexError(path, 1, "first line is not 'RINEX VERSION / TYPE'")
+    version = parse_float(lines[0][0:9], path, 1, "RINEX version", blank=-1.0)
+    if lines[0][20:21] != "O":
+        raise RinexError(path, 1, f"not an observation file (file type {lines[0][20:21]!r})")
+    if 3.0 <= version < 4.0:
+        header, start = _read_header(lines, path, version)
+        return _read_body_v3(lines, start, header, path)
+    if 2.0 <= version < 3.0:
+        header, start = _read_header(lines, path, version)
+        return _read_body_v2(lines, start, header, path)
+    raise RinexError(path, 1, f"RINEX version {version} not supported (2.1x, 3.0x)")
+
+
+def _read_header(lines: list[str], path, version: float) -> tuple[ObsHeader, int]:
+    first = lines[0]
+    hdr = ObsHeader(version=version, system=first[40:41].strip() or "G")
+    pending_sys = None  # continuation of SYS / # / OBS TYPES
+    pending_count = 0
+    v2_types: list[str] = []
+    v2_count = 0
+    for k in range(1, len(lines)):
+        line = lines[k]
+        ln = k + 1
+        label = line[LABEL_COLUMN:].strip()
+        c = line[:LABEL_COLUMN].ljust(LABEL_COLUMN)
+        if label == "END OF HEADER":
+            if pending_sys is not None and len(hdr.obs_types[pending_sys]) != pending_count:
+                raise RinexError(path, ln, f"SYS / # / OBS TYPES of {pending_sys}: fewer types than announced")
+            if version < 3.0:
+                if len(v2_types) != v2_count:
+                    raise RinexError(path, ln, "# / TYPES OF OBSERV: fewer types than announced")
+                systems = [hdr.system] if hdr.system != "M" else ["G", "R", "E", "S", "C", "J"]
+                hdr.obs_types = {s: list(v2_types) for s in systems}
+            if not hdr.obs_types:
+                raise RinexError(path, ln, "header has no observation types")
+            return hdr, k + 1
+        if label == "PGM / RUN BY / DATE":
+            hdr.program, hdr.run_by, hdr.date = c[0:20].strip(), c[20:40].strip(), c[40:60].strip()
+        elif label == "COMMENT":
+            hdr.comments.append(c.rstrip())
+        elif label == "MARKER NAME":
+            hdr.marker_name = c[0:60].strip()
+        elif label == "MARKER NUMBER":
+            hdr.marker_number = c[0:20].strip()
+        elif label == "MARKER TYPE":
+            hdr.marker_type = c[0:20].strip()
+        elif label == "OBSERVER / AGENCY":
+            hdr.observer, hdr.agency = c[0:20].strip(), c[20:60].strip()
+        elif label == "REC # / TYPE / VERS":
+            hdr.receiver_number, hdr.receiver_type, hdr.receiver_version = c[0:20].strip(), c[20:40].strip(), c[40:60].strip()
+        elif label == "ANT # / TYPE":
+            hdr.antenna_number, hdr.antenna_type = c[0:20].strip(), c[20:40].strip()
+        elif label == "APPROX POSITION XYZ":
+            hdr.approx_position_m = tuple(parse_float(c[a : a + 14], path, ln, "approx position") for a in (0, 14, 28))
+        elif label == "ANTENNA: DELTA H/E/N":
+            hdr.antenna_delta_hen_m = tuple(parse_float(c[a : a + 14], path, ln, "antenna delta") for a in (0, 14, 28))
+        elif label == "SYS / # / OBS TYPES":
+            if c[0] != " ":
+                if pending_sys is not None and len(hdr.obs_types[pending_sys]) != pending_count:
+                    raise RinexError(path, ln, f"SYS / # / OBS TYPES of {pending_sys}: fewer types than announced")
+                pending_sys = c[0]
+                pending_count = parse_int(c[3:6], path, ln, "number of observation types", blank=None)
+                hdr.obs_types[pending_sys] = []
+            elif pending_sys is None:
+                raise RinexError(path, ln, "SYS / # / OBS TYPES continuation without a system")
+            # Fixed columns (1X,A3 each from column 8): some receivers write 2-character types
+            # such as Septentrio's channel 'X1 ', so split by column, not by blanks.
+            remaining = pending_count - len(hdr.obs_types[pending_sys])
+            types = [c[7 + 4 * k : 10 + 4 * k].strip() for k in range(min(OBS_TYPES_PER_LINE_V3, remaining))]
+            for t in types:
+                if not 2 <= len(t) <= 3 or not t[0].isalpha():
+                    raise RinexError(path, ln, f"bad observation type {t!r}")
+            hdr.obs_types[pending_sys].extend(types)
+            if len(hdr.obs_types[pending_sys]) > pending_count:
+                raise RinexError(path, ln, f"SYS / # / OBS TYPES of {pending_sys}: more types than announced")
+        elif label == "# / TYPES OF OBSERV":
+            if c[0:6].strip():
+                v2_count = parse_int(c[0:6], path, ln, "number of observation types", blank=None)
+            v2_types.extend(c[6:60].split())
+        elif label == "SIGNAL STRENGTH UNIT":
+            hdr.signal_strength_unit = c[0:20].strip()
+        elif label == "INTERVAL":
+            hdr.interval_s = parse_float(c[0:10], path, ln, "interval")
+        elif label in ("TIME OF FIRST OBS", "TIME OF LAST OBS"):
+            tsys = c[48:51].strip() or ("GPS" if hdr.system in ("G", "M") else SYSTEM_TIME_NAMES.get(hdr.system, "GPS"))
+            t = _header_time(c, path, ln)
+            if label == "TIME OF FIRST OBS":
+                hdr.time_system = tsys
+                hdr.time_of_first_obs = t
+            else:
+                hdr.time_of_last_obs = t
+        elif label == "LEAP SECONDS":
+            hdr.leap_seconds = parse_int(c[0:6], path, ln, "leap seconds")
+        elif label:
+            hdr.extra.append((c, label))
+        elif line.strip():
+            raise RinexError(path, ln, "header line without a label (END OF HEADER missing?)")
+    raise RinexError(path, len(lines), "END OF HEADER not found")
+
+
+def _header_time(c: str, path, ln: int) -> float:
+    y = parse_int(c[0:6], path, ln, "year", blank=None)
+    mo = parse_int(c[6:12], path, ln, "month", blank=None)
+    d = parse_int(c[12:18], path, ln, "day", blank=None)
+    h = parse_int(c[18:24], path, ln, "hour", blank=None)
+    mi = parse_int(c[24:30], path, ln, "minute", blank=None)
+    s = parse_float(c[30:43], path, ln, "second")
+    try:
+        return gtime.from_calendar(y, mo, d, h, mi, s)
+    except gtime.TimeError as exc:
+        raise RinexError(path, ln, str(exc)) from None
+
+
+def _to_gpst(t_label: float, time_system: str) -> float:
+    # A calendar label in BDT is 14 s behind GPST; GPS, GAL and QZS labels are GPST already.
+    return t_label + 14.0 if time_system == "BDT" else t_label
+
+
+class _Collector:
+    """Accumulates (epoch, sat, type) values into the (E, S) arrays without a dense scratch."""
+
+    def __init__(self, obs_types: dict[str, list[str]]):
+        self.obs_types = obs_types
+        self.times: list[float] = []
+        self.flags: list[int] = []
+        self.clock: list[float] = []
+        self.sat_col: dict[str, int] = {}
+        self.rows: list[tuple[int, int, list[float], list[int], list[int]]] = []  # (epoch, sat col, vals, lli, ssi)
+
+    def column(self, sat: str) -> int:
+        col = self.sat_col.get(sat)
+        if col is None:
+            col = self.sat_col[sat] = len(self.sat_col)
+        return col
+
+    def finish(self, header: ObsHeader, events: int) -> ObsData:
+        n_e = len(self.times)
+        order = sorted(self.sat_col, key=lambda s: (s[0], s[1:]))
+        remap = np.empty(len(order), dtype=int)
+        for new, sat in enumerate(order):
+            remap[self.sat_col[sat]] = new
+        n_s = len(order)
+        all_types: list[str] = []
+        for types in header.obs_types.values():
+            for t in types:
+                if t not in all_types:
+                    all_types.append(t)
+        obs = {t: np.full((n_e, n_s), np.nan) for t in all_types}
+        lli = {t: np.zeros((n_e, n_s), dtype=np.int8) for t in all_types}
+        ssi = {t: np.zeros((n_e, n_s), dtype=np.int8) for t in all_types}
+        sats = np.array(order, dtype="<U3")
+        for e_i, col, vals, llis, ssis in self.rows:
+            s_i = remap[col]
+            types = header.obs_types.get(sats[s_i][0], [])
+            for t, v, l_, s_ in zip(types, vals, llis, ssis):
+                obs[t][e_i, s_i] = v
+                lli[t][e_i, s_i] = l_
+                ssi[t][e_i, s_i] = s_
+        return ObsData(
+            header,
+            np.array(self.times, dtype=float),
+            np.array(self.flags, dtype=np.int8),
+            np.array(self.clock, dtype=float),
+            sats,
+            obs,
+            lli,
+            ssi,
+            events,
+        )
+
+
+def _parse_obs_fields(text: str, n_types: int, path, ln: int):
+    vals, llis, ssis = [], [], []
+    for k in range(n_types):
+        a = k * OBS_FIELD_WIDTH
+        f = text[a : a + OBS_FIELD_WIDTH]
+        v = f[0:14]
+        if v.strip():
+            try:
+                vals.append(float(v))
+            except ValueError:
+                raise RinexError(path, ln, f"observation {k + 1}: not a number: {v.strip()!r}") from None
+        else:
+            vals.append(math.nan)
+        lc, sc = f[14:15], f[15:16]
+        if lc.strip() and not lc.isdigit():
+            raise RinexError(path, ln, f"observation {k + 1}: bad LLI {lc!r}")
+        if sc.strip() and not sc.isdigit():
+            raise RinexError(path, ln, f"observation {k + 1}: bad signal strength {sc!r}")
+        llis.append(int(lc) if lc.strip() else 0)
+        ssis.append(int(sc) if sc.strip() else 0)
+    return vals, llis, ssis
+
+
+def _read_body_v3(lines: list[str], start: int, header: ObsHeader, path) -> ObsData:
+    col = _Collector(header.obs_types)
+    events = 0
+    i = start
+    n = len(lines)
+    while i < n:
+        line = lines[i]
+        ln = i + 1
+        if not line.strip():
+            i += 1
+            continue
+        if line[0] != ">":
+            raise RinexError(path, ln, f"expected an epoch line starting with '>', got {line[:20]!r}")
+        flag = parse_int(line[31:32], path, ln, "epoch flag", blank=0)
+        count = parse_int(line[32:35], path, ln, "number of satellites", blank=None)
+        if flag not in KEPT_FLAGS:
+            if flag > 6:
+                raise RinexError(path, ln, f"epoch flag {flag} outside 0-6")
+            events += 1
+            i += 1 + count  # special records: header lines
+            if i > n:
+                raise RinexError(path, n, "event record truncated")
+            continue
+        try:
+            y, mo, d, h, mi = (int(line[a:b]) for a, b in ((2, 6), (7, 9), (10, 12), (13, 15), (16, 18)))
+        except ValueError:
+            raise RinexError(path, ln, f"bad epoch time {line[2:29]!r}") from None
+        sec = parse_float(line[18:29], path, ln, "epoch seconds", blank=math.nan)
+        if math.isnan(sec):
+            raise RinexError(path, ln, "epoch seconds missing")
+        try:
+            t = _to_gpst(gtime.from_calendar(y, mo, d, h, mi, sec), header.time_system)
+        except gtime.TimeError as exc:
+            raise RinexError(path, ln, str(exc)) from None
+        clk = parse_float(line[41:56], path, ln, "receiver clock offset", blank=math.nan)
+        e_i = len(col.times)
+        col.times.append(t)
+        col.flags.append(flag)
+        col.clock.append(clk)
+        if i + count > n - 1:
+            raise RinexError(path, n, f"epoch at line {ln} announces {count} satellites, the file ends")
+        for k in range(1, count + 1):
+            sl = lines[i + k]
+            sat = sl[0:3]
+            if sat[:1] == ">" or len(sat) < 3 or not sat[1:].strip().isdigit():
+                raise RinexError(path, i + k + 1, f"bad satellite id {sat!r} (epoch at line {ln} announces {count})")
+            sat = f"{sat[0]}{int(sat[1:]):02d}"
+            types = header.obs_types.get(sat[0])
+            if types is None:
+                raise RinexError(path, i + k + 1, f"satellite {sat} of a system without SYS / # / OBS TYPES")
+            vals, llis, ssis = _parse_obs_fields(sl[3:], len(types), path, i + k + 1)
+            col.rows.append((e_i, col.column(sat), vals, llis, ssis))
+        i += 1 + count
+    return col.finish(header, events)
+
+
+def _read_body_v2(lines: list[str], start: int, header: ObsHeader, path) -> ObsData:
+    col = _Collector(header.obs_types)
+    types = next(iter(header.obs_types.values()))
+    n_types = len(types)
+    lines_per_sat = max(1, math.ceil(n_types / OBS_PER_LINE_V2))
+    events = 0
+    i = start
+    n = len(lines)
+    default_sys = header.system if header.system not in ("M", "") else "G"
+    while i < n:
+        line = lines[i]
+        ln = i + 1
+        if not line.strip():
+            i += 1
+            continue
+        flag = parse_int(line[28:29], path, ln, "epoch flag", blank=0)
+        count = parse_int(line[29:32], path, ln, "number of satellites", blank=None)
+        if flag not in KEPT_FLAGS:
+            if flag > 6:
+                raise RinexError(path, ln, f"epoch flag {flag} outside 0-6")
+            events += 1
+            i += 1 + count
+            continue
+        try:
+            yy, mo, d, h, mi = (int(line[a:b]) for a, b in ((1, 3), (4, 6), (7, 9), (10, 12), (13, 15)))
+        except ValueError:
+            raise RinexError(path, ln, f"bad epoch time {line[0:26]!r}") from None
+        sec = parse_float(line[15:26], path, ln, "epoch seconds", blank=math.nan)
+        if math.isnan(sec):
+            raise RinexError(path, ln, "epoch seconds missing")
+        year = yy + (2000 if yy < 80 else 1900)  # RINEX 2 two-digit years: 80-99 -> 19xx
+        try:
+            t = gtime.from_calendar(year, mo, d, h, mi, sec)
+        except gtime.TimeError as exc:
+            raise RinexError(path, ln, str(exc)) from None
+        clk = parse_float(line[68:80], path, ln, "receiver clock offset", blank=math.nan)
+        # Satellite list: 12 per line from column 33, continued on following lines.
+        sats = []
+        n_sat_lines = max(1, math.ceil(count / SATS_PER_EPOCH_LINE_V2))
+        if i + n_sat_lines > n:
+            raise RinexError(path, n, f"epoch at line {ln}: satellite list truncated")
+        for m in range(n_sat_lines):
+            sl = lines[i + m]
+            for k in range(SATS_PER_EPOCH_LINE_V2):
+                if len(sats) == count:
+                    break
+                s = sl[32 + 3 * k : 35 + 3 * k]
+                if len(s) < 3 or not s[1:].strip().isdigit():
+                    raise RinexError(path, i + m + 1, f"bad satellite id {s!r} in the epoch's satellite list")
+                letter = s[0] if s[0] != " " else default_sys
+                sats.append(f"{letter}{int(s[1:]):02d}")
+        i += n_sat_lines
+        e_i = len(col.times)
+        col.times.append(t)
+        col.flags.append(flag)
+        col.clock.append(clk)
+        # Writers drop trailing blank continuation lines at the end of the file; tolerate only that.
+        if i + (count - 1) * lines_per_sat + 1 > n:
+            raise RinexError(path, n, f"epoch at line {ln}: observations truncated")
+        for sat in sats:
+            text = "".join((lines[i + m] if i + m < n else "")[:80].ljust(80) for m in range(lines_per_sat))
+            vals, llis, ssis = _parse_obs_fields(text, n_types, path, i + 1)
+            if sat[0] not in header.obs_types:
+                header.obs_types[sat[0]] = list(types)
+            col.rows.append((e_i, col.column(sat), vals, llis, ssis))
+            i += lines_per_sat
+    return col.finish(header, events)
+
+
+# --------------------------------------------------------------------------------------------
+# writing
+
+
+def _line(content: str, label: str) -> str:
+    return f"{content:<60.60}{label:<20}"
+
+
+def _header_time_line(t_gpst: float, time_system: str) -> str:
+    label_t = t_gpst - 14.0 if time_system == "BDT" else t_gpst
+    y, mo, d, h, mi, s = gtime.to_calendar(label_t, decimals=7)
+    return f"{y:6d}{mo:6d}{d:6d}{h:6d}{mi:6d}{s:13.7f}{'':5}{time_system:<3}"
+
+
+def version_of_type(t: str) -> int:
+    """3 for a RINEX 3 type ('C1C'), 2 for a RINEX 2 one ('C1', 'P2')."""
+    return 3 if len(t) == 3 else 2
+
+
+def write_obs(path: str | os.PathLike, data: ObsData) -> None:
+    """Write RINEX 3.04 observations (plain, or gzip for a .gz name).
+
+    Each satellite line carries its system's types in header order; NaN is written blank.
+    Epochs with no value for any satellite are still written (as an epoch with 0 satellites).
+    """
+    hdr = data.header
+    if not hdr.obs_types:
+        raise ValueError("header has no observation types")
+    for sys_letter, types in hdr.obs_types.items():
+        for t in types:
+            if not 2 <= len(t) <= 3 or (version_of_type(t) == 2 and t[0] != "X"):
+                raise ValueError(f"observation type {t!r} of {sys_letter} is not a RINEX 3 type")
+    systems = sorted({str(s)[0] for s in data.sats} | set(hdr.obs_types))
+    sys_char = hdr.system if hdr.system else ("M" if len(systems) > 1 else systems[0])
+    names = {"M": "MIXED", "G": "GPS", "E": "GALILEO", "C": "BEIDOU", "J": "QZSS", "R": "GLONASS"}
+    now = hdr.date or _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%d %H%M%S UTC")
+    tsys = hdr.time_system or "GPS"
+    first = hdr.time_of_first_obs if hdr.time_of_first_obs is not None else (float(data.times[0]) if len(data.times) else None)
+    out = [
+        _line(f"{WRITE_VERSION:9.2f}{'':11}{'OBSERVATION DATA':<20}{sys_char} ({names.get(sys_char, '')})",
+              "RINEX VERSION / TYPE"),
+        _line(f"{hdr.program:<20.20}{hdr.run_by:<20.20}{now:<20.20}", "PGM / RUN BY / DATE"),
+    ]
+    out += [_line(c, "COMMENT") for c in hdr.comments]
+    out.append(_line(hdr.marker_name, "MARKER NAME"))
+    if hdr.marker_number:
+        out.append(_line(hdr.marker_number, "MARKER NUMBER"))
+    if hdr.marker_type:
+        out.append(_line(hdr.marker_type, "MARKER TYPE"))
+    out.append(_line(f"{hdr.observer:<20.20}{hdr.agency:<40.40}", "OBSERVER / AGENCY"))
+    out.append(_line(f"{hdr.receiver_number:<20.20}{hdr.receiver_type:<20.20}{hdr.receiver_version:<20.20}",
+                     "REC # / TYPE / VERS"))
+    out.append(_line(f"{hdr.antenna_number:<20.20}{hdr.antenna_type:<20.20}", "ANT # / TYPE"))
+    out.append(_line("".join(f"{v:14.4f}" for v in hdr.approx_position_m), "APPROX POSITION XYZ"))
+    out.append(_line("".join(f"{v:14.4f}" for v in hdr.antenna_delta_hen_m), "ANTENNA: DELTA H/E/N"))
+    for sys_letter in systems:
+        types = hdr.obs_types.get(sys_letter)
+        if not types:
+            continue
+        for k in range(0, len(types), OBS_TYPES_PER_LINE_V3):
+            chunk = "".join(f" {t:<3}" for t in types[k : k + OBS_TYPES_PER_LINE_V3])
+            lead = f"{sys_letter}  {len(types):3d}" if k == 0 else "      "
+            out.append(_line(f"{lead}{chunk}", "SYS / # / OBS TYPES"))
+    if hdr.signal_strength_unit:
+        out.append(_line(hdr.signal_strength_unit, "SIGNAL STRENGTH UNIT"))
+    if hdr.interval_s is not None:
+        out.append(_line(f"{hdr.interval_s:10.3f}", "INTERVAL"))
+    if first is not None:
+        out.append(_line(_header_time_line(first, tsys), "TIME OF FIRST OBS"))
+    if hdr.time_of_last_obs is not None:
+        out.append(_line(_header_time_line(hdr.time_of_last_obs, tsys), "TIME OF LAST OBS"))
+    if hdr.leap_seconds is not None:
+        out.append(_line(f"{hdr.leap_seconds:6d}", "LEAP SECONDS"))
+    for content, label in hdr.extra:
+        if label in ("SYS / PHASE SHIFT", "GLONASS SLOT / FRQ #", "GLONASS COD/PHS/BIS", "ANTENNA: PHASECENTER"):
+            out.append(_line(content, label))
+    out.append(_line("", "END OF HEADER"))
+
+    sats = [str(s) for s in data.sats]
+    # Per satellite: the column of each of its types in the dict, formatted row-wise below.
+    per_sat_types = [hdr.obs_types.get(s[0], []) for s in sats]
+    for e_i, t in enumerate(np.asarray(data.times, dtype=float)):
+        body = []
+        for s_i, sat in enumerate(sats):
+            types = per_sat_types[s_i]
+            vals = [data.obs[ty][e_i, s_i] if ty in data.obs else math.nan for ty in types]
+            if all(math.isnan(v) for v in vals):
+                continue
+            fields = []
+            for ty, v in zip(types, vals):
+                if math.isnan(v):
+                    fields.append(" " * OBS_FIELD_WIDTH)
+                    continue
+                if abs(v) > MAX_OBS_VALUE:
+                    raise ValueError(f"{sat} {ty} = {v} does not fit RINEX F14.3")
+                li = int(data.lli[ty][e_i, s_i]) if ty in data.lli else 0
+                si = int(data.ssi[ty][e_i, s_i]) if ty in data.ssi else 0
+                fields.append(f"{v:14.3f}{li if li else ' '}{si if si else ' '}")
+            body.append((sat + "".join(fields)).rstrip())
+        label_t = t - 14.0 if tsys == "BDT" else t
+        y, mo, d, h, mi, s = gtime.to_calendar(label_t, decimals=7)
+        flag = int(data.flags[e_i]) if len(data.flags) else 0
+        clk = data.clock_offset_s[e_i] if len(data.clock_offset_s) else math.nan
+        clk_txt = f"      {clk:15.12f}" if not math.isnan(clk) else ""
+        out.append(f"> {y:04d} {mo:02d} {d:02d} {h:02d} {mi:02d}{s:11.7f}  {flag:1d}{len(body):3d}{clk_txt}")
+        out.extend(body)
+    with open_text_for_write(path) as f:
+        f.write("\n".join(out) + "\n")
+
+
+def empty_obs(header: ObsHeader, times, sats) -> ObsData:
+    """An ObsData with every value NaN, ready to be filled (e.g. by a simulator or a test)."""
+    times = np.asarray(times, dtype=float)
+    sats = np.asarray(sats, dtype="<U3")
+    types = sorted({t for ts in header.obs_types.values() for t in ts})
+    shape = (len(times), len(sats))
+    return ObsData(
+        header,
+        times,
+        np.zeros(len(times), dtype=np.int8),
+        np.full(len(times), np.nan),
+        sats,
+        {t: np.full(shape, np.nan) for t in types},
+        {t: np.zeros(shape, dtype=np.int8) for t in types},
+        {t: np.zeros(shape, dtype=np.int8) for t in types},
+    )
