@@ -1,0 +1,183 @@
+"""What the services and the console do with the store. Every operator change writes an audit entry in the
+same transaction as the change, so the log cannot miss one."""
+
+from __future__ import annotations
+
+import datetime as dt
+import hashlib
+import secrets
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from augnet.store.models import (
+    Alarm,
+    AlarmState,
+    ApiToken,
+    AuditEntry,
+    Operator,
+    QualitySample,
+    Role,
+    Severity,
+    Station,
+    utcnow,
+)
+
+TOKEN_BYTES = 32  # 256-bit random API tokens
+ROLE_RANK = {Role.VIEWER: 0, Role.OPERATOR: 1, Role.ADMIN: 2}
+
+
+class NotFound(LookupError):
+    pass
+
+
+class Conflict(ValueError):
+    pass
+
+
+def audit(session: Session, actor: str, action: str, target: str, **detail) -> AuditEntry:
+    entry = AuditEntry(actor=actor, action=action, target=target, detail=detail)
+    session.add(entry)
+    return entry
+
+
+# --- stations ---------------------------------------------------------------------------------------
+
+def add_station(session: Session, actor: str, code: str, xyz_m: tuple[float, float, float],
+                rtcm_station_id: int, mountpoint: str, name: str = "") -> Station:
+    if session.scalar(select(Station).where(Station.code == code)) is not None:
+        raise Conflict(f"station {code} exists")
+    st = Station(code=code, name=name, x_m=xyz_m[0], y_m=xyz_m[1], z_m=xyz_m[2],
+                 rtcm_station_id=rtcm_station_id, mountpoint=mountpoint)
+    session.add(st)
+    audit(session, actor, "station.add", code, xyz_m=list(xyz_m), mountpoint=mountpoint)
+    return st
+
+
+def get_station(session: Session, code: str) -> Station:
+    st = session.scalar(select(Station).where(Station.code == code))
+    if st is None:
+        raise NotFound(f"no station {code}")
+    return st
+
+
+def update_station(session: Session, actor: str, code: str, **changes) -> Station:
+    st = get_station(session, code)
+    allowed = {"name", "x_m", "y_m", "z_m", "rtcm_station_id", "mountpoint", "enabled"}
+    unknown = set(changes) - allowed
+    if unknown:
+        raise ValueError(f"cannot change {sorted(unknown)} of a station")
+    before = {k: getattr(st, k) for k in changes}
+    for k, v in changes.items():
+        setattr(st, k, v)
+    action = "station.edit"
+    if set(changes) == {"enabled"}:
+        action = "station.enable" if changes["enabled"] else "station.disable"
+    audit(session, actor, action, code, before=before, after=changes)
+    return st
+
+
+def list_stations(session: Session) -> list[Station]:
+    return list(session.scalars(select(Station).order_by(Station.code)))
+
+
+# --- alarms -----------------------------------------------------------------------------------------
+
+def raise_alarm(session: Session, kind: str, subject: str, severity: Severity, message: str = "") -> Alarm:
+    """Raise an alarm, or return the one already open for the same kind and subject (no duplicates while
+    a condition persists)."""
+    open_alarm = session.scalar(select(Alarm).where(Alarm.kind == kind, Alarm.subject == subject,
+                                                    Alarm.state != AlarmState.CLEARED))
+    if open_alarm is not None:
+        return open_alarm
+    alarm = Alarm(kind=kind, subject=subject, severity=severity, message=message)
+    session.add(alarm)
+    return alarm
+
+
+def clear_alarm(session: Session, kind: str, subject: str) -> Alarm | None:
+    alarm = session.scalar(select(Alarm).where(Alarm.kind == kind, Alarm.subject == subject,
+                                               Alarm.state != AlarmState.CLEARED))
+    if alarm is not None:
+        alarm.state = AlarmState.CLEARED
+        alarm.cleared_at = utcnow()
+    return alarm
+
+
+def acknowledge_alarm(session: Session, actor: str, alarm_id: int) -> Alarm:
+    alarm = session.get(Alarm, alarm_id)
+    if alarm is None:
+        raise NotFound(f"no alarm {alarm_id}")
+    if alarm.state is AlarmState.RAISED:
+        alarm.state = AlarmState.ACKNOWLEDGED
+        alarm.acknowledged_at = utcnow()
+        alarm.acknowledged_by = actor
+        audit(session, actor, "alarm.acknowledge", f"alarm:{alarm_id}", kind=alarm.kind, subject=alarm.subject)
+    return alarm
+
+
+def list_alarms(session: Session, include_cleared: bool = False, limit: int = 200) -> list[Alarm]:
+    q = select(Alarm).order_by(Alarm.raised_at.desc(), Alarm.id.desc()).limit(limit)
+    if not include_cleared:
+        q = q.where(Alarm.state != AlarmState.CLEARED)
+    return list(session.scalars(q))
+
+
+# --- operators and tokens ---------------------------------------------------------------------------
+
+def add_operator(session: Session, actor: str, name: str, password_hash: str, role: Role) -> Operator:
+    if session.scalar(select(Operator).where(Operator.name == name)) is not None:
+        raise Conflict(f"operator {name} exists")
+    op = Operator(name=name, password_hash=password_hash, role=role)
+    session.add(op)
+    audit(session, actor, "operator.add", name, role=role.value)
+    return op
+
+
+def issue_token(session: Session, operator: Operator, lifetime: dt.timedelta | None = None) -> str:
+    """A new random API token for the operator; only its SHA-256 is stored."""
+    token = secrets.token_urlsafe(TOKEN_BYTES)
+    expires = utcnow() + lifetime if lifetime else None
+    session.add(ApiToken(operator=operator, token_sha256=hashlib.sha256(token.encode()).hexdigest(),
+                         expires_at=expires))
+    return token
+
+
+def operator_for_token(session: Session, token: str) -> Operator | None:
+    digest = hashlib.sha256(token.encode()).hexdigest()
+    row = session.scalar(select(ApiToken).where(ApiToken.token_sha256 == digest))
+    if row is None or not row.operator.enabled:
+        return None
+    if row.expires_at is not None:
+        expires = row.expires_at if row.expires_at.tzinfo else row.expires_at.replace(tzinfo=dt.timezone.utc)
+        if expires <= utcnow():
+            return None
+    return row.operator
+
+
+def has_role(operator: Operator, needed: Role) -> bool:
+    return ROLE_RANK[operator.role] >= ROLE_RANK[needed]
+
+
+# --- quality history --------------------------------------------------------------------------------
+
+def record_quality(session: Session, at: dt.datetime, subject: str, fixed_fraction: float,
+                   residual_rms_m: float | None, satellites: int) -> QualitySample:
+    sample = QualitySample(at=at, subject=subject, fixed_fraction=fixed_fraction,
+                           residual_rms_m=residual_rms_m, satellites=satellites)
+    session.add(sample)
+    return sample
+
+
+def quality_history(session: Session, subject: str | None = None, since: dt.datetime | None = None,
+                    limit: int = 10_000) -> list[QualitySample]:
+    q = select(QualitySample).order_by(QualitySample.at).limit(limit)
+    if subject:
+        q = q.where(QualitySample.subject == subject)
+    if since:
+        q = q.where(QualitySample.at >= since)
+    return list(session.scalars(q))
+
+
+def audit_log(session: Session, limit: int = 200) -> list[AuditEntry]:
+    return list(session.scalars(select(AuditEntry).order_by(AuditEntry.id.desc()).limit(limit)))
