@@ -15,6 +15,7 @@ Receive rules (rssp1.md "Synchronisation and freshness"), in the order applied t
 3. not synchronised                     -> dropped, `unsynchronised`; an SSE goes out
 4. TC <= last accepted TC               -> dropped silently, `repeat`                (repetition,
                                                                                       re-sequencing)
+   (right after an SSR, the RSD with TC = TC_R is dropped as `at_sync_point`; see _receive_ssr)
 5. both safety check words (SVC) against the timestamps predicted from the SSR
                                         -> dropped, `svc`                            (corruption past
                                                                                       CRC16, wrong SID
@@ -123,8 +124,7 @@ class Endpoint:
         self._sse_seqenq: tuple[int, int] = (0, 0)
         self._sse_cycle = 0
         self._last_tc = 0  # last accepted TC (or TC_R - 1 right after an SSR)
-        self._last_t: tuple[int, int] = (0, 0)  # peer timestamps at _last_tc + _t_offset
-        self._t_offset = 0  # 1 right after an SSR: _last_t is T(_last_tc + 1) = T(TC_R)
+        self._last_t: tuple[int, int] = (0, 0)  # peer timestamps at _last_tc
         self._anchor_tc = 0  # our estimate of the peer's TC: _anchor_tc + (local_cycle - _anchor_cycle)
         self._anchor_cycle = 0
         self._missed_cycles = 0
@@ -162,9 +162,12 @@ class Endpoint:
             return self._drop("ssr_num_dataver")
         t_r = checkword.timestamp_from_ssr(ssr.seqini, self._sse_seqenq, self.peer.sid, self.peer.dataver)
         self._sse_tc_e = None
-        self._last_tc = (ssr.tc_r - 1) % TC_MODULUS
+        # The RSD sent with TC_R itself is not taken: at TC_R an error d in the SID we hold for the
+        # peer cancels out (the SSR gives us T ^ d, the RSD claims T ^ d). From TC_R + k on, the
+        # prediction carries M^k d instead, and I ^ M^k is invertible for the gaps a link allows
+        # (tests/rssp1/test_faults.py checks k < 64), so a wrong SID never verifies.
+        self._last_tc = ssr.tc_r
         self._last_t = t_r
-        self._t_offset = 1
         self._anchor_tc = ssr.tc_r
         self._anchor_cycle = self.local_cycle
         self._missed_cycles = 0
@@ -177,10 +180,11 @@ class Endpoint:
             return self._drop("unsynchronised")
         gap = (rsd.tc - self._last_tc) % TC_MODULUS
         if gap == 0 or gap >= TC_MODULUS // 2:  # not newer (u32 serial-number arithmetic)
+            if self.state is LinkState.SYNCING and gap == 0:
+                return self._drop("at_sync_point")
             return self._drop("repeat")
-        steps = gap - self._t_offset
-        t1 = TIMESTAMP_CH1.advance(self._last_t[0], steps)
-        t2 = TIMESTAMP_CH2.advance(self._last_t[1], steps)
+        t1 = TIMESTAMP_CH1.advance(self._last_t[0], gap)
+        t2 = TIMESTAMP_CH2.advance(self._last_t[1], gap)
         if checkword.timestamp_from_svc(rsd.svc, rsd.data, self.peer.sid) != (t1, t2):
             return self._drop("svc")
         if gap >= self.timing.delta_time:
@@ -193,7 +197,7 @@ class Endpoint:
                 return self._drop("late")
         else:  # the peer runs ahead of our estimate (its clock is a little faster): follow it
             self._anchor_tc, self._anchor_cycle = rsd.tc, self.local_cycle
-        self._last_tc, self._last_t, self._t_offset = rsd.tc, (t1, t2), 0
+        self._last_tc, self._last_t = rsd.tc, (t1, t2)
         self._good_since_tick = True
         self.stats["rx_rsd_ok"] += 1
         events: list[Event] = []
@@ -205,10 +209,14 @@ class Endpoint:
         return events
 
     def _link_down(self, reason: str) -> list[Event]:
-        was_up = self.state is not LinkState.DOWN
+        previous = self.state
         self.state = LinkState.DOWN
         self._missed_cycles = 0
-        if not was_up:
+        if previous is LinkState.SYNCING:
+            # an SSR was taken but no RSD verified against it (wrong SID/DATAVER, or lost again)
+            self.stats["sync_failed"] += 1
+            return []
+        if previous is LinkState.DOWN:
             return []
         self.stats["link_down"] += 1
         self.stats[f"link_down_{reason}"] += 1

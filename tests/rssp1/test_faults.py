@@ -1,0 +1,328 @@
+"""Fault injection on the sans-IO endpoint, threat by threat (EN 50159 / rssp1.md), with counts."""
+
+from __future__ import annotations
+
+import random
+import struct
+from collections import deque
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from rssp1 import checkword
+from rssp1.config import DeviceConfig, LinkTiming
+from rssp1.crc import crc16
+from rssp1.endpoint import Endpoint, LinkState
+from rssp1.frames import decode_frame, encode_rsd, encode_ssr
+from rssp1.timestamp import timestamp_at
+
+from .linkpair import CENTRE, RBC, LinkPair, downs, received, ups
+
+FIELD = LinkTiming(cycle_s=0.25, delta_time=3, life_time=4, delay_time=3)  # rssp1.md field example
+
+
+def with_fixed_crc16(frame: bytes) -> bytes:
+    return frame[:-2] + struct.pack("<H", crc16(frame[:-2]))
+
+
+def counted_data(pair: LinkPair, cycles: int) -> list[bytes]:
+    return [b"msg%04d" % (pair.cycle_no + i) for i in range(cycles)]
+
+
+def drive(pair: LinkPair, cycles: int):
+    events = []
+    for _ in range(cycles):
+        events += pair.step(b"msg%04d" % pair.cycle_no)
+    return events
+
+
+def test_link_comes_up_and_carries_data_both_ways():
+    pair = LinkPair(FIELD)
+    assert pair.bring_up() <= 3
+    events = drive(pair, 50)
+    assert received(events) == [b"msg%04d" % i for i in range(pair.cycle_no - 50, pair.cycle_no)]
+    assert sum(1 for e in pair.a_events if type(e).__name__ == "DataReceived") >= 50
+    assert downs(pair.b_events) == [] and pair.b.stats["link_up"] == 1
+    assert pair.b.stats["tx_sse"] == 1 and pair.a.stats["tx_ssr"] == 1
+
+
+def test_repetition_is_dropped_silently():
+    pair = LinkPair(FIELD)
+    pair.bring_up()
+    pair.to_b = lambda cycle, frame: [frame, frame]
+    events = drive(pair, 20)
+    assert len(received(events)) == 20 and pair.b.stats["dropped_repeat"] == 20
+    # replaying the whole recorded stream later is repetition too
+    pair.to_b = lambda cycle, frame: [frame]
+    old = [f for f in pair.sent_to_b if f[1] in (0x80, 0x81)]
+    before = pair.b.stats["rx_rsd_ok"]
+    replay_events = [e for f in old for e in pair.b.receive(f)]
+    assert received(replay_events) == [] and pair.b.stats["rx_rsd_ok"] == before
+    assert pair.b.stats["dropped_repeat"] == 20 + len(old)
+    assert downs(pair.b_events) == [] and pair.b.is_up
+
+
+def test_deletion_single_losses_tolerated_two_in_a_row_drop_the_link():
+    pair = LinkPair(FIELD)
+    pair.bring_up()
+    pair.to_b = lambda cycle, frame: [] if cycle % 5 == 0 else [frame]
+    events = drive(pair, 20)
+    assert len(received(events)) == 16 and downs(events) == []  # gap 2 < deltaTime 3
+    lost = {pair.cycle_no, pair.cycle_no + 1}  # two consecutive: gap 3 = deltaTime
+    pair.to_b = lambda cycle, frame: [] if cycle in lost else [frame]
+    sse_before = pair.b.stats["tx_sse"]
+    events = drive(pair, 3)
+    assert downs(events) == ["gap"] and pair.b.stats["dropped_gap"] == 1
+    pair.step()
+    assert pair.b.stats["tx_sse"] == sse_before + 1  # the detecting side asks for resynchronisation
+    events = drive(pair, 4)
+    assert ups(events) == 1 and pair.b.is_up
+    # three in a row: the DelayTime watchdog fires before any gap can be seen
+    lost = {pair.cycle_no, pair.cycle_no + 1, pair.cycle_no + 2}
+    events = drive(pair, 4)
+    assert downs(events) == ["timeout"]
+
+
+def test_insertion_by_a_stranger_or_with_bad_check_words_is_rejected():
+    pair = LinkPair(FIELD)
+    pair.bring_up()
+    stranger = DeviceConfig(0x0077, (0xDEADBEEF, 0x01234567))
+    t = timestamp_at(stranger.sid, 5)
+    from_stranger = encode_rsd(0x0077, RBC.address, 5, checkword.svc(b"evil", stranger.sid, t), b"evil")
+    next_tc = pair.a.tc
+    bad_svc = [encode_rsd(CENTRE.address, RBC.address, next_tc + k, (random.getrandbits(32), random.getrandbits(32)), b"evil")
+               for k in range(2)]
+    unsolicited_ssr = encode_ssr(CENTRE.address, RBC.address, next_tc, 1234, (1, 2))
+    events = [e for f in [from_stranger, *bad_svc, unsolicited_ssr] for e in pair.b.receive(f)]
+    assert received(events) == []
+    assert pair.b.stats["dropped_address"] == 1
+    assert pair.b.stats["dropped_svc"] == 2
+    assert pair.b.stats["dropped_ssr_unexpected"] == 1
+    events = drive(pair, 5)  # the real stream continues untouched
+    assert len(received(events)) == 5 and downs(pair.b_events) == []
+
+
+def test_resequencing_keeps_only_newer_frames_in_order():
+    pair = LinkPair(FIELD)
+    pair.bring_up()
+    held: list[bytes] = []
+
+    def swap_pairs(cycle, frame):
+        if not held:
+            held.append(frame)
+            return []
+        return [frame, held.pop()]  # n+1 arrives before n
+
+    pair.to_b = swap_pairs
+    events = drive(pair, 20)
+    got = received(events)
+    assert len(got) == 10 and pair.b.stats["dropped_repeat"] == 10
+    assert got == sorted(got) and downs(events) == []
+
+
+def test_every_single_bit_flip_is_detected():
+    pair = LinkPair(FIELD)
+    pair.bring_up()
+    accepted_before = pair.b.stats["rx_rsd_ok"]
+    dropped_before = sum(v for k, v in pair.b.stats.items() if k.startswith("dropped_"))
+    frame = None
+
+    def capture(cycle, f):
+        nonlocal frame
+        frame = f
+        return []
+
+    pair.to_b = capture
+    pair.step(b"integrity: section 12 OK")
+    assert frame is not None and len(frame) == 46
+    flips = 0
+    for bit in range(len(frame) * 8):
+        corrupted = bytearray(frame)
+        corrupted[bit // 8] ^= 1 << (bit % 8)
+        assert received(pair.b.receive(bytes(corrupted))) == []
+        flips += 1
+    rejected = sum(v for k, v in pair.b.stats.items() if k.startswith("dropped_")) - dropped_before
+    assert flips == 368 and rejected == 368 and pair.b.stats["rx_rsd_ok"] == accepted_before
+    assert pair.b.stats["dropped_crc16"] + pair.b.stats["dropped_length"] + pair.b.stats["dropped_type"] == 368
+    # the true frame still goes through afterwards
+    assert received(pair.b.receive(frame)) == [b"integrity: section 12 OK"]
+
+
+def test_bit_flips_that_pass_crc16_are_caught_by_the_check_words():
+    """An adversarial channel that recomputes CRC16: the safety code still protects TC, source and data.
+
+    Only the category byte and the A/B bit of the type are outside the safety code (they are not
+    safety data: A and B carry the same data); those flips deliver the original data unchanged.
+    """
+    pair = LinkPair(FIELD)
+    pair.bring_up()
+    sent: list[bytes] = []
+    pair.to_b = lambda cycle, f: sent.append(f) or []
+    pair.step(b"integrity: section 12 OK")
+    frame = sent[-1]
+    outcomes = {"rejected": 0, "header_only": 0}
+    for bit in range(len(frame[:-2]) * 8):
+        corrupted = bytearray(frame)
+        corrupted[bit // 8] ^= 1 << (bit % 8)
+        probe = Endpoint(pair.b.local, pair.b.peer, FIELD)  # a copy of B's state per probe
+        probe.__dict__.update({k: (v.copy() if hasattr(v, "copy") else v) for k, v in pair.b.__dict__.items()})
+        got = received(probe.receive(with_fixed_crc16(bytes(corrupted))))
+        if got:
+            assert got == [b"integrity: section 12 OK"]
+            assert bit < 8 or bit == 8  # category byte, or bit 0 of the type (0x80 <-> 0x81)
+            outcomes["header_only"] += 1
+        else:
+            outcomes["rejected"] += 1
+    assert outcomes == {"rejected": 44 * 8 - 9, "header_only": 9}
+
+
+def test_random_bursts_are_detected():
+    rng = random.Random(20260707)
+    pair = LinkPair(FIELD)
+    pair.bring_up()
+    sent: list[bytes] = []
+    pair.to_b = lambda cycle, f: sent.append(f) or [f]
+    bursts = rejected = 0
+    for _ in range(300):
+        pair.step(bytes(rng.getrandbits(8) for _ in range(rng.randrange(1, 64))))
+        frame = sent[-1]
+        for _ in range(5):
+            n_bits = len(frame) * 8
+            length = rng.randrange(2, 65)
+            start = rng.randrange(0, n_bits - length)
+            value = int.from_bytes(frame, "little") ^ ((rng.getrandbits(length - 2) << 1 | 1 | 1 << (length - 1)) << start)
+            corrupted = value.to_bytes(len(frame), "little")
+            bursts += 1
+            ev = pair.b.receive(corrupted)
+            rejected += not received(ev)
+    assert bursts == rejected == 1500
+    assert pair.b.is_up and downs(pair.b_events) == []
+
+
+class DelayLine:
+    def __init__(self) -> None:
+        self.delay = 0
+        self.queue: deque[tuple[int, bytes]] = deque()
+
+    def __call__(self, cycle: int, frame: bytes) -> list[bytes]:
+        self.queue.append((cycle + self.delay, frame))
+        out = []
+        while self.queue and self.queue[0][0] <= cycle:
+            out.append(self.queue.popleft()[1])
+        return out
+
+
+@pytest.mark.parametrize(
+    "timing", [FIELD, LinkTiming(cycle_s=0.25, delta_time=3, life_time=4, delay_time=8)], ids=["field", "long_delaytime"]
+)
+def test_delay_within_limits_is_accepted_beyond_limits_drops_the_link_until_it_ends(timing):
+    """Field timing: the DelayTime watchdog fires before the first stale frame arrives. With a long
+    DelayTime the stale frames do arrive, and the freshness rule (TC older than the estimate of the
+    sender's TC by deltaTime or more) drops them."""
+    pair = LinkPair(timing)
+    pair.bring_up()
+    to_b, to_a = DelayLine(), DelayLine()
+    pair.to_b, pair.to_a = to_b, to_a
+    to_b.delay = to_a.delay = 1
+    events = drive(pair, 20)
+    assert len(received(events)) == 19 and downs(events) == [] and pair.b.stats["dropped_late"] == 0
+    # The bearer's delay grows by one cycle every other cycle up to 6 (beyond deltaTime = 3): the
+    # TC gaps stay at 2, so only the freshness rule can notice that the frames are getting stale.
+    events = []
+    for i in range(40):
+        to_b.delay = to_a.delay = min(1 + i // 2, 6)
+        events += drive(pair, 1)
+    # Stale frames are dropped (`late`); the link then falls to the DelayTime watchdog, or with a
+    # long DelayTime to the gap rule, as the stale frames leave last-accepted TC further behind.
+    assert downs(events) == (["timeout"] if timing is FIELD else ["gap"])
+    assert pair.b.stats["dropped_late"] >= 1
+    accepted_tcs = [e.tc for e in events if type(e).__name__ == "DataReceived"]
+    assert all(tc - 1000 < 20 + 8 for tc in accepted_tcs)  # nothing sent after the delay passed 3
+    # SSE -> SSR round trips of 8+ cycles exceed lifeTime (4): never resynchronised while delayed
+    assert pair.b.stats["dropped_ssr_stale"] + pair.b.stats["dropped_ssr_unexpected"] >= 5
+    assert pair.b.stats["link_up"] == 1 and not pair.b.is_up
+    to_b.delay = to_a.delay = 0
+    start = pair.cycle_no
+    while not pair.b.is_up:
+        pair.step()
+        assert pair.cycle_no - start <= timing.resync_bound_cycles
+    assert pair.b.stats["link_up"] == 2
+
+
+@pytest.mark.parametrize("wrong", ["sid", "dataver"])
+def test_wrong_sid_or_dataver_never_brings_the_link_up(wrong):
+    real = CENTRE
+    if wrong == "sid":
+        as_seen = DeviceConfig(real.address, (real.sid[0], real.sid[1] ^ 0x00010000), real.dataver)
+    else:
+        as_seen = DeviceConfig(real.address, real.sid, (real.dataver[0] ^ 1, real.dataver[1]))
+    pair = LinkPair(FIELD, sender_as_seen=as_seen)
+    events = drive(pair, 40)
+    assert received(events) == [] and pair.b.stats["link_up"] == 0
+    assert pair.b.stats["ssr_accepted"] >= 5  # SSRs arrive and are taken ...
+    assert pair.b.stats["sync_failed"] == pair.b.stats["ssr_accepted"] or pair.b.state is LinkState.SYNCING
+    # ... but no RSD verifies against them: each of the 40 is dropped for a reason
+    st_ = pair.b.stats
+    assert st_["dropped_svc"] >= 15
+    assert st_["dropped_svc"] + st_["dropped_unsynchronised"] + st_["dropped_at_sync_point"] == 40
+    assert pair.a.is_up  # the other direction is fine
+
+
+@pytest.mark.parametrize(
+    "timing", [FIELD, LinkTiming(cycle_s=0.1, delta_time=5, life_time=3, delay_time=6)], ids=["field", "lenient"]
+)
+def test_resynchronisation_after_link_loss_within_configured_cycles(timing):
+    worst = 0
+    for outage in range(1, 25):
+        pair = LinkPair(timing)
+        pair.bring_up()
+        pair.to_b = pair.to_a = lambda cycle, f: []
+        pair.run(outage)
+        pair.to_b = pair.to_a = lambda cycle, f: [f]
+        # lost frames = outage: the gap rule fires at outage + 1 >= deltaTime, the watchdog at
+        # outage >= DelayTime
+        short = outage + 1 < timing.delta_time and outage < timing.delay_time
+        up_since = 0
+        for n in range(1, timing.resync_bound_cycles + 4):
+            pair.step()
+            up_since = up_since if (pair.a.is_up and pair.b.is_up) else n
+        assert pair.b.stats["link_down"] == (0 if short else 1), outage
+        assert pair.a.stats["link_down"] == (0 if short else 1), outage
+        assert up_since <= timing.resync_bound_cycles, (outage, up_since, pair.b.stats)
+        worst = max(worst, up_since)
+    assert worst <= timing.resync_bound_cycles
+
+
+def test_tc_wraps_around_u32():
+    pair = LinkPair(FIELD, initial_tc=(1 << 32) - 5)
+    pair.bring_up()
+    events = drive(pair, 20)
+    assert len(received(events)) == 20 and downs(events) == []
+    assert pair.a.tc < 100
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.binary(min_size=0, max_size=80), max_size=8))
+def test_arbitrary_bytes_never_raise_and_never_deliver(blobs):
+    ep = Endpoint(RBC, CENTRE, FIELD)
+    for blob in blobs:
+        assert received(ep.receive(blob)) == []
+    ep.cycle(b"x")
+    # also frames that decode: correct CRC16 on random content
+    for blob in blobs:
+        if len(blob) >= 2:
+            assert received(ep.receive(with_fixed_crc16(b"\x01\x80" + blob + b"\0\0"))) == []
+
+
+def test_wrong_sid_cannot_cancel_for_any_allowed_gap():
+    """I ^ M^k invertible for every gap k a link can accept, both channels: an SID error d gives a
+    prediction error (I ^ M^k) d != 0, so it is always seen (see Endpoint._receive_ssr)."""
+    from rssp1.sid_recovery import solve_gf2
+    from rssp1.timestamp import TIMESTAMP_LFSRS
+
+    for lfsr in TIMESTAMP_LFSRS:
+        for k in range(1, 64):
+            mk = lfsr.power_map(k)
+            solved = solve_gf2([(1 << i) ^ mk(1 << i) for i in range(32)], 0)
+            assert solved is not None and solved[1] == [], k
