@@ -240,7 +240,7 @@ def test_delay_within_limits_is_accepted_beyond_limits_drops_the_link_until_it_e
     accepted_tcs = [e.tc for e in events if type(e).__name__ == "DataReceived"]
     assert all(tc - 1000 < 20 + 8 for tc in accepted_tcs)  # nothing sent after the delay passed 3
     # SSE -> SSR round trips of 8+ cycles exceed lifeTime (4): never resynchronised while delayed
-    assert pair.b.stats["dropped_ssr_stale"] + pair.b.stats["dropped_ssr_unexpected"] >= 5
+    assert pair.b.stats["dropped_ssr_stale"] + pair.b.stats["dropped_ssr_unexpected"] >= 3
     assert pair.b.stats["link_up"] == 1 and not pair.b.is_up
     to_b.delay = to_a.delay = 0
     start = pair.cycle_no
