@@ -1,1 +1,70 @@
-"""RTCM 3 codec: framing (CRC-24Q), message layouts as data, encoders and decoders."""
+"""RTCM 3 codec: framing (CRC-24Q), message layouts as data, encoders and decoders.
+
+Which function to call:
+
+(a) split a byte stream into frames (sans-IO, never raises on input)::
+
+        reader = RtcmStreamReader()
+        for fr in reader.feed(chunk): ...        # Frame(msg_type, payload, raw); reader.stats counts
+        read_frames(path)                        # a whole file, with stats and any truncated tail
+
+(b) decode any frame or payload::
+
+        msg = decode(frame_or_payload)           # RtcmMessage (.fields like pyrtcm), MsmMessage
+                                                 # (numpy arrays) or UnknownMessage (payload kept)
+
+(c) encode a message::
+
+        payload = encode(msg); raw = encode_frame(msg)      # or frame(payload)
+        RtcmMessage(1005, {"DF003": 7, "DF025": x, ...})    # fixed layouts take pyrtcm's field names
+
+(d) MSM <-> observables (pseudorange m, phase cycles, Doppler Hz, CNR dB-Hz, lock ms; NaN = absent)::
+
+        obs = msm_to_observables(msm)
+        msm = observables_to_msm(obs, level=7, station_id=..., epoch=tow_ms)
+        msgs = observables_to_msm_list(...)      # splits > 64 cells over several MSM (DF393)
+
+(e) batch encode one MSM type for many receivers (VRS per train), arrays (nrx, nsat, nsig)::
+
+        batch = encode_msm_batch("G", 7, sat_ids, sig_ids, station_ids, epochs, pr, cp, dop, cnr, lock)
+        batch[i]                                 # framed bytes of receiver i; batch.data is all of them
+
+Supported: 1005, 1006, 1033, 1019, 1042, 1045, 1046 and MSM4-7 of GPS, GLONASS, Galileo, SBAS,
+QZSS, BeiDou, NavIC (observables need the system in ``augnet.gnss.signals``: G, E, C). Values are
+those pyrtcm reports (scaled, DF names); MSM epochs are the raw 30-bit field (TOW ms in the system's
+own time scale: BDT for BeiDou; day-of-week << 27 | tk for GLONASS).
+"""
+
+from augnet.gnss.rtcm.batch import EncodedBatch, encode_msm_batch
+from augnet.gnss.rtcm.codec import (
+    Message,
+    RtcmMessage,
+    UnknownMessage,
+    decode,
+    encode,
+    encode_frame,
+    text_fields,
+)
+from augnet.gnss.rtcm.errors import DecodeError, EncodeError
+from augnet.gnss.rtcm.framing import Frame, RtcmStreamReader, StreamStats, crc24q, frame, iter_frames, read_frames
+from augnet.gnss.rtcm.layouts import SUPPORTED_TYPES
+from augnet.gnss.rtcm.msm import MsmMessage, decode_msm, encode_msm, make_msm
+from augnet.gnss.rtcm.observables import (
+    Observables,
+    lock_indicator_df402,
+    lock_indicator_df407,
+    lock_time_df402,
+    lock_time_df407,
+    msm_to_observables,
+    observables_to_msm,
+    observables_to_msm_list,
+)
+
+__all__ = [
+    "DecodeError", "EncodeError", "EncodedBatch", "Frame", "Message", "MsmMessage", "Observables",
+    "RtcmMessage", "RtcmStreamReader", "SUPPORTED_TYPES", "StreamStats", "UnknownMessage", "crc24q",
+    "decode", "decode_msm", "encode", "encode_frame", "encode_msm", "encode_msm_batch", "frame",
+    "iter_frames", "lock_indicator_df402", "lock_indicator_df407", "lock_time_df402", "lock_time_df407",
+    "make_msm", "msm_to_observables", "observables_to_msm", "observables_to_msm_list", "read_frames",
+    "text_fields",
+]

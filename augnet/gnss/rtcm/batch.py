@@ -1,0 +1,285 @@
+"""Batch MSM encoder: the same MSM type for many receivers at once (the VRS of every train, one epoch).
+
+Input arrays carry a leading receiver axis: observables (nrx, nsat, nsig), station ids and epochs
+(nrx,). Output: one framed RTCM message per receiver, byte-identical to what ``observables_to_msm``
++ ``encode_msm`` + ``frame`` give for that receiver alone.
+
+How, without a Python loop per receiver:
+  1. field integers for every receiver come from the same vectorised ``observables_to_fields``;
+  2. receivers whose cell masks are identical share one bit layout (usually all of them, since
+     trains on one line see the same satellites); we loop over the distinct layouts only;
+  3. per layout, each field (<= 32 bits) lands in one or two 64-bit big-endian words: a gather,
+     two shifts and a segmented sum (``np.add.reduceat``; the bits never overlap, so sum == or)
+     pack all receivers' payloads at once;
+  4. CRC-24Q is linear over GF(2) (initial value 0, no final XOR), so a frame's CRC is the XOR of
+     per-position contributions ``T[position][byte]``; one gather and one XOR-reduce frame them all.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from augnet.gnss.rtcm.errors import EncodeError
+from augnet.gnss.rtcm.fields import FIELDS
+from augnet.gnss.rtcm.framing import CRC24Q_TABLE, FRAME_OVERHEAD_BYTES, MAX_PAYLOAD_BYTES, PREAMBLE
+from augnet.gnss.rtcm.layouts import MSM_MAX_CELLS, cell_fields, msm_type, sat_fields
+from augnet.gnss.rtcm.observables import cell_presence, observables_to_fields, wavelengths
+
+_MAX_FRAME = MAX_PAYLOAD_BYTES + FRAME_OVERHEAD_BYTES
+
+
+@lru_cache(maxsize=1)
+def _crc_position_table() -> np.ndarray:
+    """T[j, b]: CRC-24Q of byte b followed by j zero bytes, j = 0 .. max frame length - 1."""
+    table = np.array(CRC24Q_TABLE, dtype=np.uint32)
+    out = np.empty((_MAX_FRAME, 256), dtype=np.uint32)
+    z = table.copy()  # CRC of the single byte b (initial value 0)
+    for j in range(_MAX_FRAME):
+        out[j] = z
+        z = ((z << 8) & 0xFFFFFF) ^ table[z >> 16]  # one more zero byte
+    return out
+
+
+def crc24q_columns(cols: np.ndarray) -> np.ndarray:
+    """CRC-24Q of each column of an (L, n) uint8 array (byte position major), vectorised over columns."""
+    length, n = cols.shape
+    if length == 0:
+        return np.zeros(n, dtype=np.uint32)
+    t = _crc_position_table()
+    contrib = t[(length - 1 - np.arange(length))[:, None], cols]
+    return np.bitwise_xor.reduce(contrib, axis=0)
+
+
+def crc24q_rows(rows: np.ndarray) -> np.ndarray:
+    """CRC-24Q of each row of an (n, L) uint8 array."""
+    return crc24q_columns(np.ascontiguousarray(np.asarray(rows, dtype=np.uint8).T))
+
+
+@dataclass(frozen=True)
+class EncodedBatch:
+    """All frames of a batch in one buffer: frame i is ``data[offsets[i]:offsets[i + 1]]``."""
+
+    data: bytes
+    offsets: np.ndarray  # (nrx + 1,)
+
+    def __len__(self) -> int:
+        return len(self.offsets) - 1
+
+    def __getitem__(self, i: int) -> bytes:
+        return self.data[self.offsets[i] : self.offsets[i + 1]]
+
+    def frames(self) -> list[bytes]:
+        return [self[i] for i in range(len(self))]
+
+
+@dataclass(frozen=True)
+class _Packing:
+    nbytes: int  # payload bytes
+    masks: np.ndarray  # (nfields,) int64: (1 << width) - 1 for each column of the value matrix
+    part_field: np.ndarray  # (nparts,) column feeding each part
+    part_lshift: np.ndarray  # (nparts,) uint64
+    part_rshift: np.ndarray  # (nparts,) uint64
+    word_starts: np.ndarray  # (nwords,) first part of each 64-bit word
+
+
+def _split(value_width: int) -> list[int]:
+    """Widths of the <= 32-bit columns a wide field (64-bit masks) is cut into."""
+    out = []
+    while value_width > 32:
+        out.append(32)
+        value_width -= 32
+    if value_width:
+        out.append(value_width)
+    return out
+
+
+@lru_cache(maxsize=1024)
+def _packing(widths: tuple[int, ...]) -> _Packing:
+    starts = np.concatenate([[0], np.cumsum(widths)])
+    total = int(starts[-1])
+    nbytes = (total + 7) // 8
+    pf, ls, rs, word = [], [], [], []
+    for i, w in enumerate(widths):
+        if w == 0:
+            continue
+        o, e = int(starts[i]), int(starts[i]) + w
+        k = o // 64
+        word_end = 64 * (k + 1)
+        if e <= word_end:  # the whole field in word k
+            pf.append(i); ls.append(word_end - e); rs.append(0); word.append(k)
+        else:  # high bits end word k, low bits start word k + 1
+            pf.append(i); ls.append(0); rs.append(e - word_end); word.append(k)
+            pf.append(i); ls.append(64 * (k + 2) - e); rs.append(0); word.append(k + 1)
+    word = np.array(word)
+    nwords = (total + 63) // 64
+    word_starts = np.searchsorted(word, np.arange(nwords))
+    masks = (np.int64(1) << np.array(widths, dtype=np.int64)) - 1
+    return _Packing(nbytes, masks, np.array(pf), np.array(ls, dtype=np.uint64),
+                    np.array(rs, dtype=np.uint64), word_starts)
+
+
+def _pack_columns(values: np.ndarray, widths: tuple[int, ...]) -> np.ndarray:
+    """(nfields, n) signed integers -> (nbytes, n) big-endian bit-packed payloads, one per column.
+
+    Receivers run along the contiguous axis, so every step below is a whole-row numpy operation.
+    """
+    p = _packing(widths)
+    v = np.bitwise_and(values, p.masks[:, None], out=values).view(np.uint64)  # two's complement -> bits
+    parts = v[p.part_field]
+    parts <<= p.part_lshift[:, None]
+    parts >>= p.part_rshift[:, None]
+    words = np.add.reduceat(parts, p.word_starts, axis=0)  # (nwords, n) native uint64
+    nwords, n = words.shape
+    # bytes of each word most significant first (big-endian), then byte position major
+    be = words.view(np.uint8).reshape(nwords, n, 8)[:, :, ::-1].transpose(0, 2, 1).reshape(nwords * 8, n)
+    return be[: p.nbytes]
+
+
+def encode_msm_batch(
+    system: str,
+    level: int,
+    sat_ids,
+    sig_ids,
+    station_ids,
+    epochs,
+    pseudorange_m,
+    phase_cycles,
+    doppler_hz=None,
+    cnr_dbhz=None,
+    lock_ms=None,
+    half_cycle=None,
+    *,
+    multiple: int = 0,
+    iods: int = 0,
+    clock_steering: int = 0,
+    external_clock: int = 0,
+    smoothing: int = 0,
+    smoothing_interval: int = 0,
+) -> EncodedBatch:
+    """Framed MSM (level 4..7) for each receiver: observables (nrx, nsat, nsig), ids/epochs (nrx,).
+
+    Satellites and signals without a cell are left out of each receiver's masks, exactly as in
+    ``observables_to_msm``. Raises ``EncodeError`` when a receiver has more than 64 cells (split the
+    satellites over several calls with ``multiple=1`` on all but the last).
+    """
+    mt = msm_type(system, level)
+    sat_ids = np.asarray(sat_ids, dtype=np.int64)
+    sig_ids = np.asarray(sig_ids, dtype=np.int64)
+    pr = np.asarray(pseudorange_m, dtype=np.float64)
+    if pr.ndim != 3 or pr.shape[1:] != (len(sat_ids), len(sig_ids)):
+        raise EncodeError(f"observables must be (nrx, {len(sat_ids)}, {len(sig_ids)}), got {pr.shape}")
+    nrx = pr.shape[0]
+    if nrx == 0:
+        return EncodedBatch(b"", np.zeros(1, dtype=np.int64))
+    station_ids = np.broadcast_to(np.asarray(station_ids, dtype=np.int64), (nrx,))
+    epochs = np.broadcast_to(np.asarray(epochs, dtype=np.int64), (nrx,))
+    for name, arr, df in (("station id", station_ids, "DF003"), ("epoch", epochs, "DF004")):
+        f = FIELDS[df]
+        if nrx and (arr.min() < f.raw_min or arr.max() > f.raw_max):
+            raise EncodeError(f"{name} outside [{f.raw_min}, {f.raw_max}]")
+    header_const = []
+    for df, v in (("DF393", multiple), ("DF409", iods), ("DF001_7", 0), ("DF411", clock_steering),
+                  ("DF412", external_clock), ("DF417", smoothing), ("DF418", smoothing_interval)):
+        f = FIELDS[df]
+        if not f.raw_min <= v <= f.raw_max:
+            raise EncodeError(f"{df} ({f.what}) = {v} outside [{f.raw_min}, {f.raw_max}]")
+        header_const.append((v, f.width))
+
+    fields = observables_to_fields(level, wavelengths(system, sig_ids), pr, phase_cycles, doppler_hz, cnr_dbhz,
+                                   lock_ms, half_cycle)
+    present = cell_presence(pr, np.asarray(phase_cycles, dtype=np.float64))
+    flat = present.reshape(nrx, -1)
+    keys = np.packbits(flat, axis=1) if flat.shape[1] else np.zeros((nrx, 1), dtype=np.uint8)
+    if (keys == keys[0]).all():  # the usual case: one layout for every receiver
+        uniq, group_of = keys[:1], np.zeros(nrx, dtype=np.int64)
+    else:
+        uniq, group_of = np.unique(keys, axis=0, return_inverse=True)
+        group_of = np.asarray(group_of).reshape(-1)
+
+    sat_roles = sat_fields(system, level)
+    cell_roles = cell_fields(level)
+    frame_len = np.empty(nrx, dtype=np.int64)
+    packed: list[tuple[np.ndarray, np.ndarray]] = []
+    for g in range(len(uniq)):
+        rx = np.flatnonzero(group_of == g)
+        mask_full = present[rx[0]]
+        keep_sat = mask_full.any(axis=1)
+        keep_sig = mask_full.any(axis=0)
+        mask = mask_full[np.ix_(keep_sat, keep_sig)]
+        nsat, nsig = mask.shape
+        if nsat * nsig > MSM_MAX_CELLS:
+            raise EncodeError(
+                f"{nsat} satellites x {nsig} signals = {nsat * nsig} cells exceed the MSM limit of "
+                f"{MSM_MAX_CELLS}; encode the satellites in groups with multiple=1 on all but the last"
+            )
+        n = len(rx)
+        sat_mask = sum(1 << (64 - int(s)) for s in sat_ids[keep_sat])
+        sig_mask = sum(1 << (32 - int(s)) for s in sig_ids[keep_sig])
+        cell_bits = 0
+        for b in mask.ravel().tolist():
+            cell_bits = (cell_bits << 1) | b
+        # Constant header columns: message number, DF393..DF418, satellite/signal/cell masks
+        cols: list[np.ndarray] = []
+        widths: list[int] = []
+
+        def const(value: int, width: int) -> None:
+            shift = width
+            for w in _split(width):
+                shift -= w
+                cols.append(np.full((1, n), (value >> shift) & ((1 << w) - 1), dtype=np.int64))
+                widths.append(w)
+
+        const(mt, 12)
+        cols.append(station_ids[None, rx]); widths.append(12)
+        cols.append(epochs[None, rx]); widths.append(30)
+        for v, w in header_const:
+            const(v, w)
+        const(sat_mask, 64)
+        const(sig_mask, 32)
+        const(cell_bits, nsat * nsig)
+        all_rx = n == nrx  # one layout for the whole batch: no receiver selection needed
+        sat_sel = np.flatnonzero(keep_sat)
+        cell_sel = np.flatnonzero(mask_full.ravel())  # cell order: satellite major, then signal
+        nhead = len(widths)
+        values = np.empty((nhead + len(sat_roles) * nsat + len(cell_roles) * len(cell_sel), n), dtype=np.int64)
+        values[:nhead] = np.concatenate(cols, axis=0)
+        row = nhead
+        for role, df in sat_roles:
+            arr = fields.get(role)
+            if arr is None:
+                values[row : row + nsat] = 0
+            else:
+                values[row : row + nsat] = (arr if all_rx else arr[rx]).T[sat_sel]
+            widths.extend([FIELDS[df].width] * nsat)
+            row += nsat
+        for role, df in cell_roles:
+            arr = fields[role].reshape(nrx, -1)
+            values[row : row + len(cell_sel)] = (arr if all_rx else arr[rx]).T[cell_sel]
+            widths.extend([FIELDS[df].width] * len(cell_sel))
+            row += len(cell_sel)
+        payload = _pack_columns(values, tuple(widths))
+        nbytes = payload.shape[0]
+        frames = np.empty((nbytes + FRAME_OVERHEAD_BYTES, n), dtype=np.uint8)  # byte position major
+        frames[0] = PREAMBLE
+        frames[1] = nbytes >> 8
+        frames[2] = nbytes & 0xFF
+        frames[3 : 3 + nbytes] = payload
+        crc = crc24q_columns(frames[: 3 + nbytes])
+        frames[-3] = crc >> 16
+        frames[-2] = (crc >> 8) & 0xFF
+        frames[-1] = crc & 0xFF
+        frames = frames.T  # (n, frame length)
+        frame_len[rx] = frames.shape[1]
+        packed.append((rx, frames))
+
+    offsets = np.zeros(nrx + 1, dtype=np.int64)
+    np.cumsum(frame_len, out=offsets[1:])
+    if len(packed) == 1:  # common case: every receiver has the same layout, frames already in order
+        return EncodedBatch(packed[0][1].tobytes(), offsets)
+    out = np.empty(int(offsets[-1]), dtype=np.uint8)
+    for rx, frames in packed:
+        out[offsets[rx][:, None] + np.arange(frames.shape[1])] = frames
+    return EncodedBatch(out.tobytes(), offsets)
