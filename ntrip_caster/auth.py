@@ -1,0 +1,136 @@
+"""Users, groups and per-mountpoint access; passwords stored as scrypt hashes (hashlib.scrypt).
+
+Hash format: `scrypt$<log2 N>$<r>$<p>$<salt b64>$<hash b64>`. Parameters N=2^14, r=8, p=1 are
+Percival's (scrypt paper, 2009) interactive-login choice and the example in Python's hashlib docs:
+~16 MiB and a few tens of ms per check. A caster sees the same credentials on every reconnect of a
+train, so successful checks are remembered in a bounded cache keyed by an HMAC of the credentials
+under a per-process random key (no plaintext password is kept).
+"""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import hmac
+import os
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass, field
+
+SCRYPT_LOG2_N = 14
+SCRYPT_R = 8
+SCRYPT_P = 1
+SCRYPT_SALT_BYTES = 16
+SCRYPT_HASH_BYTES = 32
+# hashlib's default maxmem is 32 MiB; scrypt needs 128 * r * N bytes plus overhead.
+SCRYPT_MAXMEM_BYTES = 64 * 1024 * 1024
+# Distinct verified credentials remembered (one per train or station is the realistic case).
+AUTH_CACHE_ENTRIES = 100_000
+# Groups value that opens a mountpoint to anyone, without credentials.
+PUBLIC = "*"
+
+
+def hash_password(password: str, *, log2_n: int = SCRYPT_LOG2_N, r: int = SCRYPT_R,
+                  p: int = SCRYPT_P, salt: bytes | None = None) -> str:
+    salt = os.urandom(SCRYPT_SALT_BYTES) if salt is None else salt
+    digest = hashlib.scrypt(password.encode("utf-8"), salt=salt, n=1 << log2_n, r=r, p=p,
+                            maxmem=SCRYPT_MAXMEM_BYTES, dklen=SCRYPT_HASH_BYTES)
+    b64 = base64.b64encode
+    return f"scrypt${log2_n}${r}${p}${b64(salt).decode()}${b64(digest).decode()}"
+
+
+def verify_password(password: str, stored: str) -> bool:
+    """True when `password` matches the stored scrypt hash; False for any malformed hash."""
+    try:
+        scheme, log2_n, r, p, salt, digest = stored.split("$")
+        if scheme != "scrypt":
+            return False
+        want = base64.b64decode(digest, validate=True)
+        got = hashlib.scrypt(password.encode("utf-8"), salt=base64.b64decode(salt, validate=True),
+                             n=1 << int(log2_n), r=int(r), p=int(p), maxmem=SCRYPT_MAXMEM_BYTES,
+                             dklen=len(want))
+    except (ValueError, TypeError):
+        return False
+    return hmac.compare_digest(got, want)
+
+
+@dataclass(slots=True)
+class User:
+    name: str
+    password_hash: str
+    groups: frozenset[str] = field(default_factory=frozenset)
+
+
+class Authenticator:
+    """Decides who may read or publish a mountpoint.
+
+    `read_groups` / `write_groups` of a mountpoint are sets of group names; PUBLIC ('*') means no
+    credentials are needed. A user may read a mountpoint when one of their groups is listed.
+    """
+
+    def __init__(self, users: dict[str, User] | None = None) -> None:
+        self.users: dict[str, User] = dict(users or {})
+        self._key = os.urandom(32)
+        self._cache: OrderedDict[bytes, str] = OrderedDict()
+        self._lock = threading.Lock()  # checks run in worker threads, lookups on the event loop
+        self.checks = 0  # scrypt verifications run (the expensive path)
+
+    def _cache_key(self, user: str, password: str) -> bytes:
+        return hmac.new(self._key, f"{user}\0{password}".encode("utf-8", "surrogatepass"),
+                        hashlib.sha256).digest()
+
+    def cached_user(self, user: str | None, password: str | None) -> str | None:
+        """The user name if these credentials were verified before, else None (cheap)."""
+        if user is None or password is None:
+            return None
+        key = self._cache_key(user, password)
+        with self._lock:
+            name = self._cache.get(key)
+            if name is not None:
+                self._cache.move_to_end(key)
+        return name
+
+    def check(self, user: str | None, password: str | None) -> str | None:
+        """Verify credentials (scrypt; run it off the event loop). Returns the user name or None."""
+        if user is None or password is None:
+            return None
+        cached = self.cached_user(user, password)
+        if cached is not None:
+            return cached
+        record = self.users.get(user)
+        if record is None:
+            # Spend the same time as for a real user, so response time does not reveal user names.
+            verify_password(password, _DUMMY_HASH)
+            self.checks += 1
+            return None
+        self.checks += 1
+        if not verify_password(password, record.password_hash):
+            return None
+        self._remember(user, password)
+        return user
+
+    def check_source_password(self, password: str, write_groups: frozenset[str]) -> str | None:
+        """NTRIP 1 SOURCE carries only a password: accept it when it is the password of a user in
+        one of the mountpoint's write groups. Returns that user's name or None."""
+        for name, record in self.users.items():
+            if record.groups & write_groups:
+                if self.cached_user(name, password) or self.check(name, password):
+                    return name
+        return None
+
+    def _remember(self, user: str, password: str) -> None:
+        key = self._cache_key(user, password)
+        with self._lock:
+            self._cache[key] = user
+            while len(self._cache) > AUTH_CACHE_ENTRIES:
+                self._cache.popitem(last=False)
+
+    def allowed(self, user: str | None, groups: frozenset[str]) -> bool:
+        if PUBLIC in groups:
+            return True
+        if user is None or user not in self.users:
+            return False
+        return bool(self.users[user].groups & groups)
+
+
+_DUMMY_HASH = hash_password("not a password", salt=b"\0" * SCRYPT_SALT_BYTES)
