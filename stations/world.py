@@ -1,0 +1,433 @@
+"""The simulated world: receivers (reference stations and trains) observing the truth constellation.
+
+`World(scenario)` builds everything the scenario names -- constellation and broadcast ephemerides
+(or a RINEX nav file), orbit/clock errors, ionosphere and troposphere fields, receivers with their
+clocks, noise and multipath, tracking (arcs, ambiguities, cycle slips, blockages) -- and
+`World.epochs()` yields blocks of consecutive epochs, every array vectorised over
+(epoch, receiver, satellite, signal).
+
+Observation equations (per receiver r, satellite s, signal k; metres unless cycles):
+    P = rho + c (dt_r - dt^s) + T + I_k + m_k + e_k
+    L = [rho + c (dt_r - dt^s) + T - I_k + mu_k + eps_k] / lambda_k + N_k      [cycles]
+    D = -[d(rho)/dt + c (d(dt_r)/dt - d(dt^s)/dt)] / lambda_k                     [Hz]
+rho: geometric range from the truth satellite position at transmission (broadcast + orbit error) to
+the receiver antenna at the true reception time, Earth rotation during transit included; dt^s:
+truth satellite clock (broadcast polynomial + relativistic term + clock error); dt_r: receiver
+clock; the epoch tag is true time + dt_r.  Group delays (TGD/BGD) are zero in the nominal
+constellation and not modelled.
+
+Truth (positions, clocks, atmosphere per receiver and satellite, ambiguities) is returned beside the
+observables and never mixed into them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from augnet.gnss import time as gtime
+from augnet.gnss.constants import (GM_BDS_M3_S2, GM_GAL_M3_S2, GM_GPS_M3_S2, OMEGA_E_BDS_RAD_S,
+                                   OMEGA_E_GAL_RAD_S, OMEGA_E_GPS_RAD_S, SPEED_OF_LIGHT_M_S)
+from augnet.gnss.ephemeris import Ephemeris, NavigationData, satellite_state
+from augnet.gnss.geometry import ecef_to_geodetic, enu_rotation, geodetic_deg_to_ecef
+from augnet.gnss.signals import by_rinex
+from stations import constellation as const
+from stations.ionosphere import IonosphereField, delay_m
+from stations.kinematics import train_motion
+from stations.orbit_errors import OrbitClockErrors
+from stations.scenario import Scenario, resolve_ionosphere
+from stations.track import TrackLine
+from stations.troposphere import WetResidualField, niell, zenith_delays_m
+
+TRANSIT_ITERATIONS = 3  # each iteration shrinks the transit-time error by v_sat/c ~ 1e-5
+NOMINAL_TRANSIT_S = 0.075
+BLOCK_EPOCHS = 60  # epochs computed together (vectorised); results do not depend on it
+AMBIGUITY_SPAN_CYCLES = 500  # new-arc ambiguities drawn in +-this: phase stays within ~100 m of code
+SLIP_MAX_CYCLES = 20
+HALF_CYCLE_RESOLVE_S = 6.0  # half-cycle ambiguity flagged until the receiver finds the preamble
+
+# Receiver grades: zenith noise split into white noise and AR(1) multipath, multipath correlation
+# time (static antennas see slow multipath, minutes; a moving antenna's decorrelates in seconds),
+# C/N0 at zenith, clock drift (geodetic OCXO-steered vs train TCXO).
+GRADES = {
+    "geodetic": dict(mp_tau_s=120.0, cnr_zenith=50.0, clock_drift=2e-10, clock_rw=1e-11),
+    "train": dict(mp_tau_s=3.0, cnr_zenith=46.0, clock_drift=5e-9, clock_rw=1e-10),
+}
+WHITE_SHARE_CODE = 0.5  # fraction of code error variance that is white (rest is multipath)
+WHITE_SHARE_PHASE = 0.7
+DOPPLER_NOISE_HZ = 0.02
+
+
+@dataclass
+class Receiver:
+    id: str
+    kind: str  # "station" or "train"
+    rtcm_id: int  # RTCM reference station id
+    grade: str
+    ecef: np.ndarray  # (n_epochs, 3) antenna truth
+    velocity: np.ndarray  # (n_epochs, 3)
+    track_id: str = ""
+    km: np.ndarray | None = None  # (n_epochs,) chainage [km] for trains
+    speed_m_s: np.ndarray | None = None
+    swept_mask_deg: np.ndarray | None = None  # (n_epochs,) blockage elevation mask since last epoch
+    outage: np.ndarray | None = None  # (n_epochs,) bool: no data (station outage)
+
+
+@dataclass
+class EpochBlock:
+    """Consecutive epochs: observables and, apart, the truth.  Shapes (E, R, N, K) / (E, R, N)."""
+
+    t_gpst: np.ndarray  # (E,) epoch tags (receiver time, GPST seconds)
+    epoch_index: np.ndarray  # (E,)
+    pseudorange_m: np.ndarray
+    phase_cyc: np.ndarray
+    doppler_hz: np.ndarray
+    cnr_dbhz: np.ndarray
+    lli: np.ndarray  # int8: bit 0 loss of lock, bit 1 half-cycle ambiguity
+    lock_time_s: np.ndarray
+    observed: np.ndarray  # (E, R, N, K) bool
+    # truth
+    rx_ecef: np.ndarray  # (E, R, 3)
+    rx_clock_s: np.ndarray  # (E, R)
+    elevation_rad: np.ndarray  # (E, R, N)
+    azimuth_rad: np.ndarray
+    range_m: np.ndarray  # geometric range incl. Sagnac (E, R, N)
+    sat_clock_s: np.ndarray  # truth satellite clock (E, R, N)
+    sat_clock_error_s: np.ndarray  # truth minus broadcast
+    orbit_error_range_m: np.ndarray  # truth minus broadcast orbit, projected on the line of sight
+    stec_tecu: np.ndarray  # slant TEC (E, R, N)
+    tropo_m: np.ndarray  # slant troposphere delay (E, R, N)
+    ambiguity_cyc: np.ndarray  # integer ambiguity (E, R, N, K), NaN when not tracked
+    multipath_code_m: np.ndarray
+    multipath_phase_m: np.ndarray
+    extras: dict = field(default_factory=dict)
+
+
+def _system_gm_omge(system: str):
+    return {"G": (GM_GPS_M3_S2, OMEGA_E_GPS_RAD_S), "E": (GM_GAL_M3_S2, OMEGA_E_GAL_RAD_S),
+            "C": (GM_BDS_M3_S2, OMEGA_E_BDS_RAD_S)}[system]
+
+
+class World:
+    def __init__(self, scenario: Scenario, nav_ephemerides: list[Ephemeris] | None = None):
+        sc = scenario
+        self.scenario = sc
+        self.t0 = float(gtime.from_datetime(sc.start))
+        self.n_epochs = sc.n_epochs
+        self.dt = sc.interval_s
+        self.t_tags = self.t0 + np.arange(self.n_epochs) * self.dt
+        self.track = TrackLine(sc.line) if sc.line is not None else None
+        # constellation: our nominal one, or the satellites of a given nav file
+        t_end = self.t_tags[-1]
+        if nav_ephemerides is None:
+            self.orbits = const.nominal_orbits(sc.constellations, self.t0, sc.seed)
+            self.ephemerides = const.broadcast_ephemerides(self.orbits, self.t0, t_end)
+            self.nominal = True
+        else:
+            self.orbits = []
+            self.ephemerides = [e for e in nav_ephemerides if e.system in sc.constellations]
+            self.nominal = False
+        self.nav = NavigationData(self.ephemerides)
+        sats = [s for s in self.nav.satellites if s[0] in sc.constellations]
+        self.sats = sats
+        n = len(sats)
+        self.sat_system = np.array([s[0] for s in sats])
+        # signals (N, K)
+        self.K = max(len(sc.signals[s]) for s in sc.constellations)
+        self.codes = np.full((n, self.K), "", dtype="<U2")
+        self.freq_hz = np.full((n, self.K), np.nan)
+        for j, s in enumerate(sats):
+            for k, code in enumerate(sc.signals[s[0]]):
+                self.codes[j, k] = code
+                self.freq_hz[j, k] = by_rinex(s[0], code).freq_hz
+        self.wavelength_m = SPEED_OF_LIGHT_M_S / self.freq_hz
+        self.signal_exists = ~np.isnan(self.freq_hz)
+        self.omge = np.array([_system_gm_omge(s)[1] for s in self.sat_system])
+        # truth error models
+        errs = sc.errors
+        rows0 = self.nav.select(sats, self.t0)
+        sqrt_a = np.where(rows0 >= 0, self.nav.table.sqrt_a[np.maximum(rows0, 0)], 5150.0)
+        gm = np.array([_system_gm_omge(s)[0] for s in self.sat_system])
+        period = 2 * np.pi * np.sqrt(sqrt_a**6 / gm)
+        steps = [(f.satellite, self.t0 + f.at_s, f.step_ns * 1e-9) for f in sc.faults
+                 if f.kind == "satellite_clock_step"]
+        oc = errs.orbit_clock
+        self.orbit_errors = OrbitClockErrors(sats, oc.orbit_error_m if oc.enabled else 0.0,
+                                             oc.clock_error_ns if oc.enabled else 0.0, sc.seed, period, steps)
+        self.receivers = self._build_receivers()
+        lat_c, lon_c = self._region_centre()
+        self.iono_params = resolve_ionosphere(errs.ionosphere)
+        self.iono = IonosphereField(self.iono_params, lat_c, lon_c, sc.seed)
+        tr = errs.troposphere
+        self.tropo_enabled = tr.enabled
+        self.wet = WetResidualField(tr.wet_residual_m if tr.enabled else 0.0, tr.wet_residual_scale_km,
+                                    lat_c, lon_c, sc.seed)
+        self.doy = sc.start.timetuple().tm_yday
+        R = len(self.receivers)
+        # per-receiver noise levels (zenith): columns code, phase
+        nz = errs.noise
+        self.sigma_code = np.array([nz.geodetic_code_m if r.grade == "geodetic" else nz.train_code_m
+                                    for r in self.receivers])
+        self.sigma_phase = np.array([nz.geodetic_phase_m if r.grade == "geodetic" else nz.train_phase_m
+                                     for r in self.receivers])
+        if not nz.enabled:
+            self.sigma_code[:] = 0.0
+            self.sigma_phase[:] = 0.0
+        self.multipath_on = nz.enabled and nz.multipath
+        self.mp_phi = np.exp(-self.dt / np.array([GRADES[r.grade]["mp_tau_s"] for r in self.receivers]))
+        self.cnr_zenith = np.array([GRADES[r.grade]["cnr_zenith"] for r in self.receivers])
+        # random streams, one per purpose, each drawn in fixed shapes per epoch (block-size free)
+        ss = np.random.SeedSequence([sc.seed, 0x51A7])
+        self._rng_noise, self._rng_track, self._rng_clock = [np.random.default_rng(s) for s in ss.spawn(3)]
+        rng_init = np.random.default_rng([sc.seed, 0x1217])
+        drift_scale = np.array([GRADES[r.grade]["clock_drift"] for r in self.receivers])
+        self.clk_bias0 = rng_init.uniform(-5e-7, 5e-7, R)
+        self.clk_drift0 = rng_init.uniform(-1, 1, R) * drift_scale
+        self.clk_rw = np.array([GRADES[r.grade]["clock_rw"] for r in self.receivers])
+        if not errs.receiver_clock:
+            self.clk_bias0[:] = 0.0
+            self.clk_drift0[:] = 0.0
+            self.clk_rw[:] = 0.0
+        # sequential state
+        shape = (R, n, self.K)
+        self._mp_code = rng_init.standard_normal(shape)  # unit-variance AR(1) states
+        self._mp_phase = rng_init.standard_normal(shape)
+        self._clk_freq = self.clk_drift0.copy()
+        self._clk_bias = self.clk_bias0.copy()
+        self._tracking = np.zeros((R, n), bool)
+        self._lock_s = np.zeros(shape)
+        self._amb = np.zeros(shape)
+        self._half = np.zeros(shape)
+        self._next_epoch = 0
+
+    # -- set-up ---------------------------------------------------------------------------------
+    def _build_receivers(self) -> list[Receiver]:
+        sc = self.scenario
+        out = []
+        t_rel = self.t_tags - self.t0
+        outage_faults = {}
+        for f in sc.faults:
+            if f.kind == "station_outage":
+                until = f.until_s if f.until_s is not None else sc.duration_s
+                outage_faults.setdefault(f.station, []).append((f.at_s, until))
+        for i, st in enumerate(sc.stations):
+            if st.km is not None:
+                enu = self.track.station_point(st.km, st.offset_m, st.mast_m)
+                ecef = self.track.plane_to_ecef(enu)
+            else:
+                ecef = geodetic_deg_to_ecef(st.lat_deg, st.lon_deg, st.h_m)
+            out_mask = np.zeros(self.n_epochs, bool)
+            for a, b in list(st.outages) + outage_faults.get(st.id, []):
+                out_mask |= (t_rel >= a) & (t_rel < b)
+            out.append(Receiver(st.id, "station", st.station_id if st.station_id is not None else i + 1,
+                                st.grade, np.broadcast_to(ecef, (self.n_epochs, 3)).copy(),
+                                np.zeros((self.n_epochs, 3)), outage=out_mask))
+        for j, tr in enumerate(sc.trains):
+            m = train_motion(tr, self.track.length_m, t_rel)
+            off = self.track.track_offset_m(tr.track)
+            enu = self.track.point(m.s_m, off, tr.antenna_height_m)
+            ecef = self.track.plane_to_ecef(enu)
+            step = 0.5  # m, for the direction of motion
+            ahead = self.track.plane_to_ecef(self.track.point(m.s_m + tr.direction * step, off,
+                                                              tr.antenna_height_m))
+            unit = ahead - ecef
+            unit /= np.maximum(np.linalg.norm(unit, axis=1, keepdims=True), 1e-12)
+            vel = unit * m.speed_m_s[:, None]
+            prev = np.concatenate([[m.s_m[0]], m.s_m[:-1]])
+            swept = self.track.blockage_mask_deg(prev, m.s_m)
+            out.append(Receiver(tr.id, "train", 3000 + j, tr.grade, ecef, vel,
+                                track_id=self.track.track_id(tr.track), km=m.s_m / 1e3,
+                                speed_m_s=m.speed_m_s, swept_mask_deg=swept,
+                                outage=np.zeros(self.n_epochs, bool)))
+        return out
+
+    def _region_centre(self):
+        pts = np.concatenate([r.ecef[:1] for r in self.receivers])
+        llh = ecef_to_geodetic(pts)
+        return float(np.degrees(llh[:, 0].mean())), float(np.degrees(llh[:, 1].mean()))
+
+    @property
+    def receiver_ids(self) -> list[str]:
+        return [r.id for r in self.receivers]
+
+    # -- simulation -----------------------------------------------------------------------------
+    def epochs(self, block: int = BLOCK_EPOCHS):
+        """Yield EpochBlocks from the current epoch to the end of the scenario."""
+        while self._next_epoch < self.n_epochs:
+            e0 = self._next_epoch
+            e1 = min(e0 + block, self.n_epochs)
+            yield self._block(e0, e1)
+            self._next_epoch = e1
+
+    def run(self, block: int = BLOCK_EPOCHS) -> list[EpochBlock]:
+        return list(self.epochs(block))
+
+    def _clock_block(self, E: int):
+        """Receiver clock bias [s] and drift [s/s] per epoch: drift with random-walk frequency."""
+        R = len(self.receivers)
+        bias = np.empty((E, R))
+        freq = np.empty((E, R))
+        w = self._rng_clock.standard_normal((E, R))
+        for e in range(E):
+            bias[e] = self._clk_bias
+            freq[e] = self._clk_freq
+            self._clk_bias = self._clk_bias + self._clk_freq * self.dt
+            self._clk_freq = self._clk_freq + self.clk_rw * math.sqrt(self.dt) * w[e]
+        return bias, freq
+
+    def _block(self, e0: int, e1: int) -> EpochBlock:
+        E = e1 - e0
+        R = len(self.receivers)
+        N = len(self.sats)
+        K = self.K
+        c = SPEED_OF_LIGHT_M_S
+        t_tag = self.t_tags[e0:e1]
+        rx = np.stack([r.ecef[e0:e1] for r in self.receivers], axis=1)  # (E, R, 3)
+        rx_vel = np.stack([r.velocity[e0:e1] for r in self.receivers], axis=1)
+        dtr, dtr_dot = self._clock_block(E)
+        t_rx = t_tag[:, None] - dtr  # true reception time (E, R)
+
+        # satellites: ephemeris rows selected at the epoch, truth = broadcast + error
+        idx = self.nav.select(self.sats, t_tag)  # (E, N)
+        valid = np.broadcast_to((idx >= 0)[:, None, :], (E, R, N))
+        rows = self.nav.table.take(np.broadcast_to(np.maximum(idx, 0)[:, None, :], (E, R, N)))
+        sat_idx = np.broadcast_to(np.arange(N), (E, R, N))
+        tau = np.full((E, R, N), NOMINAL_TRANSIT_S)
+        t_rx3 = np.broadcast_to(t_rx[:, :, None], (E, R, N))
+        err_t = t_rx3 - NOMINAL_TRANSIT_S
+        for it in range(TRANSIT_ITERATIONS + 1):
+            st = satellite_state(rows, t_rx3, -tau)
+            if it == 0:
+                d_orbit = self.orbit_errors.ecef_m(sat_idx, err_t, st.position_m, st.velocity_m_s)
+            pos = st.position_m + d_orbit
+            ang = self.omge * tau
+            ca, sa = np.cos(ang), np.sin(ang)
+            rot = np.stack([pos[..., 0] * ca + pos[..., 1] * sa, -pos[..., 0] * sa + pos[..., 1] * ca,
+                            pos[..., 2]], axis=-1)
+            los = rot - rx[:, :, None, :]
+            rng = np.linalg.norm(los, axis=-1)
+            tau = rng / c
+        u = los / rng[..., None]
+        vel = st.velocity_m_s
+        range_rate = np.einsum("erni,erni->ern", u, vel - rx_vel[:, :, None, :])
+        dclk_err = self.orbit_errors.clock_s(sat_idx, err_t)
+        dts = st.clock_bias_s + dclk_err
+        dts_dot = st.clock_drift_s_s
+        orbit_err_range = np.einsum("erni,erni->ern", u, d_orbit)
+
+        # receiver geodetic, ENU, azimuth/elevation
+        llh = ecef_to_geodetic(rx)  # (E, R, 3)
+        rot_enu = enu_rotation(llh[..., 0], llh[..., 1])  # (E, R, 3, 3)
+        enu = np.einsum("erij,ernj->erni", rot_enu, u)
+        el = np.arcsin(np.clip(enu[..., 2], -1, 1))
+        az = np.mod(np.arctan2(enu[..., 0], enu[..., 1]), 2 * np.pi)
+        el_safe = np.maximum(el, np.radians(1.0))
+
+        # atmosphere
+        lat = np.broadcast_to(llh[..., 0][..., None], (E, R, N))
+        lon = np.broadcast_to(llh[..., 1][..., None], (E, R, N))
+        stec = self.iono.slant_tec_tecu(lat, lon, az, el_safe, t_rx3)
+        iono = delay_m(stec[..., None], self.freq_hz[None, None])  # (E, R, N, K)
+        if self.tropo_enabled:
+            zhd, zwd = zenith_delays_m(llh[..., 0], llh[..., 2])
+            zwd = zwd + self.wet.zwd_residual_m(llh[..., 0], llh[..., 1], llh[..., 2], t_rx)
+            mh, mw = niell(el_safe, lat, llh[..., 2][..., None], self.doy)
+            tropo = zhd[..., None] * mh + zwd[..., None] * mw
+        else:
+            tropo = np.zeros((E, R, N))
+
+        # elevation-dependent noise scale (RTKLIB-style a^2 + b^2/sin^2(el), a = b)
+        el_scale = np.sqrt(0.5 + 0.5 / np.sin(el_safe) ** 2)  # (E, R, N)
+        cnr = (self.cnr_zenith[None, :, None] - 20.0 * (1.0 - np.sin(el_safe)) ** 2)[..., None] \
+            - np.array([0.0, 3.0, 4.0][:K])[None, None, None, :]
+
+        # visibility: mask, ephemeris, blockage, outage
+        mask = np.radians(self.scenario.elevation_mask_deg)
+        blk = np.zeros((E, R))
+        outage = np.zeros((E, R), bool)
+        for i, r in enumerate(self.receivers):
+            if r.swept_mask_deg is not None:
+                blk[:, i] = r.swept_mask_deg[e0:e1]
+            outage[:, i] = r.outage[e0:e1]
+        visible = valid & (el >= mask) & (el >= np.radians(blk)[:, :, None]) & ~outage[:, :, None]
+
+        # sequential part: tracking (arcs, slips), AR(1) multipath, white noise
+        errs = self.scenario.errors
+        p_slip = errs.cycle_slips_per_hour / 3600.0 * self.dt
+        sig_exists = self.signal_exists[None]
+        P = np.full((E, R, N, K), np.nan)
+        L = np.full((E, R, N, K), np.nan)
+        D = np.full((E, R, N, K), np.nan)
+        S = np.full((E, R, N, K), np.nan)
+        lli = np.zeros((E, R, N, K), np.int8)
+        lock = np.full((E, R, N, K), np.nan)
+        amb = np.full((E, R, N, K), np.nan)
+        mpc_out = np.zeros((E, R, N, K))
+        mpp_out = np.zeros((E, R, N, K))
+        lam = self.wavelength_m[None]
+        geo = rng + c * (dtr[:, :, None] - dts) + tropo  # non-dispersive part (E, R, N)
+        phi = self.mp_phi[:, None, None]
+        innov = np.sqrt(1 - phi**2)
+        sc_code = self.sigma_code[:, None, None]
+        sc_phase = self.sigma_phase[:, None, None]
+        for e in range(E):
+            z = self._rng_noise.standard_normal((4, R, N, K))
+            self._mp_code = phi * self._mp_code + innov * z[0]
+            self._mp_phase = phi * self._mp_phase + innov * z[1]
+            draw_slip = self._rng_track.random((R, N))
+            draw_amb = self._rng_track.integers(-AMBIGUITY_SPAN_CYCLES, AMBIGUITY_SPAN_CYCLES + 1, (R, N, K))
+            draw_jump = self._rng_track.integers(1, SLIP_MAX_CYCLES + 1, (R, N, K)) * \
+                self._rng_track.choice([-1, 1], (R, N, K))
+            draw_jump_on = self._rng_track.random((R, N, K)) < 0.6
+            draw_half = self._rng_track.random((R, N, K)) < 0.5
+            vis = visible[e]
+            new_arc = vis & ~self._tracking
+            slip = vis & ~new_arc & (draw_slip < p_slip)
+            jump = np.where(slip[..., None] & draw_jump_on, draw_jump, 0)
+            # a slip changes at least one signal's ambiguity
+            none = slip & ~(jump != 0).any(-1)
+            jump[..., 0] = np.where(none, draw_jump[..., 0], jump[..., 0])
+            self._amb = np.where(new_arc[..., None], draw_amb, self._amb + jump)
+            reset = new_arc[..., None] | (jump != 0)
+            self._lock_s = np.where(reset, 0.0, self._lock_s + self.dt)
+            if errs.half_cycle:
+                self._half = np.where(new_arc[..., None], np.where(draw_half, 0.5, 0.0), self._half)
+                self._half = np.where(self._lock_s >= HALF_CYCLE_RESOLVE_S, 0.0, self._half)
+            self._tracking = vis
+            obs = vis[..., None] & sig_exists[0]
+            es = el_scale[e][..., None]
+            mp_c = (sc_code * np.sqrt(1 - WHITE_SHARE_CODE) * es * self._mp_code) if self.multipath_on else 0.0
+            mp_p = (sc_phase * np.sqrt(1 - WHITE_SHARE_PHASE) * es * self._mp_phase) if self.multipath_on else 0.0
+            n_c = sc_code * np.sqrt(WHITE_SHARE_CODE) * es * z[2]
+            n_p = sc_phase * np.sqrt(WHITE_SHARE_PHASE) * es * z[3]
+            ge = geo[e][..., None]
+            ie = iono[e]
+            P[e] = np.where(obs, ge + ie + mp_c + n_c, np.nan)
+            L[e] = np.where(obs, (ge - ie + mp_p + n_p) / lam[0] + self._amb + self._half, np.nan)
+            D[e] = np.where(obs, -(range_rate[e] + c * (dtr_dot[e][:, None] - dts_dot[e]))[..., None]
+                            / lam[0] + DOPPLER_NOISE_HZ * (sc_phase > 0) * z[3], np.nan)
+            S[e] = np.where(obs, cnr[e], np.nan)
+            lli[e] = np.where(obs, (reset * 1 | (self._half != 0) * 2), 0).astype(np.int8)
+            lock[e] = np.where(obs, self._lock_s, np.nan)
+            amb[e] = np.where(obs, self._amb, np.nan)
+            mpc_out[e] = np.where(obs, mp_c, 0.0)
+            mpp_out[e] = np.where(obs, mp_p, 0.0)
+        observed = ~np.isnan(P)
+        if not self.scenario.errors.noise.enabled:
+            S = np.round(S)  # keep C/N0 deterministic and on the RINEX/RTCM grid
+        return EpochBlock(
+            t_gpst=t_tag, epoch_index=np.arange(e0, e1), pseudorange_m=P, phase_cyc=L, doppler_hz=D,
+            cnr_dbhz=S, lli=lli, lock_time_s=lock, observed=observed, rx_ecef=rx, rx_clock_s=dtr,
+            elevation_rad=el, azimuth_rad=az, range_m=rng, sat_clock_s=dts, sat_clock_error_s=dclk_err,
+            orbit_error_range_m=orbit_err_range, stec_tecu=stec, tropo_m=tropo, ambiguity_cyc=amb,
+            multipath_code_m=mpc_out, multipath_phase_m=mpp_out)
+
+
+def load_nav_file(path: str | Path) -> list[Ephemeris]:
+    """Broadcast ephemerides from a RINEX 3 navigation file (the --nav option)."""
+    from augnet.gnss.rinex import nav as rinex_nav
+
+    return list(rinex_nav.read_nav(path))
