@@ -110,6 +110,9 @@ class RtcmStreamReader:
 
     def feed(self, data: bytes) -> list[Frame]:
         self._buf += data
+        return self._scan()
+
+    def _scan(self) -> list[Frame]:
         out: list[Frame] = []
         buf = self._buf
         stats = self.stats
@@ -152,12 +155,20 @@ class RtcmStreamReader:
             del buf[:drop]
         return out
 
-    def close(self) -> int:
-        """End of input: count what is left (a truncated frame) as truncated and return its size."""
-        left = len(self._buf)
-        self.stats.truncated_bytes += left
-        self._buf.clear()
-        return left
+    def close(self) -> list[Frame]:
+        """End of input: return any frames still hidden behind an incomplete candidate, and count
+        the rest of the buffer (a truncated frame, or a false preamble announcing more bytes than
+        came) in ``stats.truncated_bytes``."""
+        out: list[Frame] = []
+        skipped_before = self.stats.bytes_skipped
+        while self._buf:
+            # The buffer starts with a candidate that cannot complete: not a frame after all.
+            del self._buf[0]
+            self.stats.bytes_skipped += 1
+            out.extend(self._scan())
+        self.stats.truncated_bytes += self.stats.bytes_skipped - skipped_before
+        self.stats.bytes_skipped = skipped_before
+        return out
 
 
 @dataclass
@@ -176,13 +187,14 @@ def read_frames(path: str | Path, chunk_bytes: int = 65536) -> FileFrames:
     with open(path, "rb") as fh:
         while chunk := fh.read(chunk_bytes):
             frames.extend(reader.feed(chunk))
-    tail = reader.close()
-    return FileFrames(frames, reader.stats, tail)
+    frames.extend(reader.close())
+    return FileFrames(frames, reader.stats, reader.stats.truncated_bytes)
 
 
 def iter_frames(path: str | Path, chunk_bytes: int = 65536) -> Iterator[Frame]:
-    """Yield the complete frames of a file one by one (streaming; partial tail silently dropped)."""
+    """Yield the complete frames of a file one by one (streaming; a partial tail is dropped)."""
     reader = RtcmStreamReader()
     with open(path, "rb") as fh:
         while chunk := fh.read(chunk_bytes):
             yield from reader.feed(chunk)
+    yield from reader.close()
