@@ -97,7 +97,8 @@ class ClientSession:
             return
         payload = data if self.version == 1 else encode_chunk(data)
         t = self.transport
-        if t.get_write_buffer_size() + len(payload) > self.caster.limits.max_client_backlog_bytes:
+        queued = t.get_write_buffer_size()
+        if queued and queued + len(payload) > self.caster.limits.max_client_backlog_bytes:
             self.caster.drop_client(self, "backlog")
             return
         t.write(payload)
@@ -164,7 +165,10 @@ class Mountpoint:
             room = limit - n
             for s in clients.values():
                 t = s.transport
-                if t.get_write_buffer_size() > room:
+                # An empty queue always takes the piece (one publish may exceed the bound on its
+                # own); otherwise queued + piece must stay within the bound.
+                queued = t.get_write_buffer_size()
+                if queued and queued > room:
                     dropped.append(s)
                 else:
                     t.write(payload)
