@@ -1,0 +1,98 @@
+"""Batch MSM encoder: byte for byte what the single-message path gives, and pyrtcm reads it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from augnet.gnss.rtcm import EncodeError, Observables, encode_msm, encode_msm_batch, frame, observables_to_msm
+from augnet.gnss.rtcm.batch import crc24q_rows
+from augnet.gnss.rtcm.framing import crc24q
+
+from ._support import assert_same_fields, pyrtcm_fields
+from .test_observables import random_observables
+
+
+def batch_inputs(rng, system, nrx, nsat, nsig, missing):
+    base = random_observables(rng, system, nsat, nsig, missing=0.0)
+    shape = (nrx, nsat, nsig)
+    pr = base.pseudorange_m + rng.normal(0, 20, shape)  # trains a few km apart see shifted ranges
+    cp = base.phase_cycles + rng.normal(0, 50, shape)
+    dop = base.doppler_hz + rng.normal(0, 0.3, (nrx, nsat, 1))
+    cnr = base.cnr_dbhz + rng.normal(0, 2, shape)
+    lock = rng.uniform(0, 1e6, shape)
+    half = rng.random(shape) < 0.1
+    gone = rng.random(shape) < missing  # each receiver loses different cells: several layouts
+    gone_sat = rng.random((nrx, nsat, 1)) < missing / 2
+    for a in (pr, cp):
+        a[gone | gone_sat] = np.nan
+    dop[gone] = np.nan
+    station_ids = rng.integers(0, 4096, nrx)
+    epochs = rng.integers(0, 604_800_000, nrx)
+    return base.sat_ids, base.sig_ids, station_ids, epochs, pr, cp, dop, cnr, lock, half
+
+
+def single(system, level, sat_ids, sig_ids, station_ids, epochs, pr, cp, dop, cnr, lock, half, i, **header):
+    obs = Observables(system, sat_ids, sig_ids, pr[i], cp[i], dop[i], cnr[i], lock[i], half[i])
+    return frame(encode_msm(observables_to_msm(obs, level, int(station_ids[i]), int(epochs[i]), **header)))
+
+
+@pytest.mark.parametrize("system", ["G", "E", "C"])
+@pytest.mark.parametrize("level", [4, 7])
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2**32 - 1), nrx=st.integers(1, 40), nsat=st.integers(1, 21),
+       nsig=st.integers(1, 3), missing=st.sampled_from([0.0, 0.05, 0.3]))
+def test_batch_equals_single_messages(system, level, seed, nrx, nsat, nsig, missing):
+    rng = np.random.default_rng(seed)
+    nsat = min(nsat, 64 // nsig)
+    args = batch_inputs(rng, system, nrx, nsat, nsig, missing)
+    batch = encode_msm_batch(system, level, *args, iods=3, clock_steering=1)
+    assert len(batch) == nrx
+    for i in range(nrx):
+        assert batch[i] == single(system, level, *args, i, iods=3, clock_steering=1), f"receiver {i}"
+    assert b"".join(batch.frames()) == batch.data
+
+
+@pytest.mark.parametrize("level", [4, 7])
+def test_pyrtcm_reads_batch_output(level):
+    rng = np.random.default_rng(11)
+    args = batch_inputs(rng, "G", 25, 12, 2, 0.05)
+    batch = encode_msm_batch("G", level, *args)
+    station_ids, epochs = args[2], args[3]
+    for i in range(len(batch)):
+        theirs = pyrtcm_fields(batch[i])
+        assert theirs["DF003"] == station_ids[i] and theirs["DF004"] == epochs[i]
+        obs_frame = single("G", level, *args, i)
+        assert_same_fields(pyrtcm_fields(obs_frame), theirs)
+
+
+def test_thousand_receivers_one_layout():
+    rng = np.random.default_rng(12)
+    args = batch_inputs(rng, "G", 1000, 12, 2, 0.0)
+    batch = encode_msm_batch("G", 7, *args)
+    assert len(batch) == 1000 and len(set(np.diff(batch.offsets))) == 1
+    for i in (0, 499, 999):
+        assert batch[i] == single("G", 7, *args, i)
+        assert crc24q(batch[i]) == 0
+
+
+def test_batch_rejects_more_than_64_cells():
+    rng = np.random.default_rng(13)
+    args = batch_inputs(rng, "C", 2, 22, 3, 0.0)
+    with pytest.raises(EncodeError, match="64"):
+        encode_msm_batch("C", 7, *args)
+
+
+def test_empty_batch():
+    pr = np.zeros((0, 3, 2))
+    batch = encode_msm_batch("G", 7, [1, 2, 3], [2, 16], [], [], pr, pr)
+    assert len(batch) == 0 and batch.data == b""
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.integers(0, 60).flatmap(lambda n: st.lists(st.binary(min_size=n, max_size=n), min_size=1, max_size=8)))
+def test_vectorised_crc_equals_table_crc(rows):
+    arr = np.array([list(r) for r in rows], dtype=np.uint8).reshape(len(rows), len(rows[0]))
+    assert crc24q_rows(arr).tolist() == [crc24q(r) for r in rows]
