@@ -1,9 +1,11 @@
 """Onboard -> ATP: virtual balise telegrams over RSSP-I, the onboard library end and an ATP simulator.
 
 The onboard positioning core calls `OnboardAtpLink.report_balise(...)` when the train's estimated
-position passes a virtual balise group of the track map; each telegram is repeated for
-`repeat_cycles` main cycles (a lost RSD must not lose a passage) and carries a sequence number the ATP
-deduplicates on. Between passages the link still sends an empty RSD every cycle to stay synchronised.
+position passes a virtual balise group of the track map. Each telegram carries a sequence number and is
+sent every cycle until the ATP acknowledges it (an RbcAck message whose last_report_seq is the highest
+telegram sequence taken) or it is older than `max_age_s` (a stale passage is worse than none: it is
+dropped and counted). So a passage survives lost RSDs and even an RSSP-I resynchronisation. The ATP
+deduplicates on the sequence number. Between passages both ends still send an RSD every cycle.
 
 The ATP simulator checks every telegram against its own copy of the balise map (group known, same
 track and chainage), that passages follow the direction of travel, and that the onboard integrity is
@@ -16,9 +18,17 @@ from collections import Counter
 from dataclasses import dataclass
 
 from rssp1.endpoint import DataReceived, LinkDown
-from rssp1.messages import AlarmCode, SectionStatus, VirtualBaliseTelegram, decode_payload, encode_payload
+from rssp1.messages import (
+    AlarmCode,
+    RbcAck,
+    SectionStatus,
+    VirtualBaliseTelegram,
+    decode_payload,
+    encode_message,
+    encode_payload,
+)
 
-TELEGRAM_REPEAT_CYCLES = 3  # a passage survives two lost RSDs in a row (deltaTime 3 tolerates two)
+TELEGRAM_MAX_AGE_S = 5.0  # an unacknowledged passage older than this is dropped (train moved ~100 m+)
 MAX_TELEGRAMS_PER_CYCLE = 16
 
 
@@ -29,12 +39,12 @@ class BaliseLocation:
 
 
 class OnboardAtpLink:
-    def __init__(self, endpoint, train_id: int, *, repeat_cycles: int = TELEGRAM_REPEAT_CYCLES) -> None:
+    def __init__(self, endpoint, train_id: int, *, max_age_s: float = TELEGRAM_MAX_AGE_S) -> None:
         self.endpoint = endpoint
         self.train_id = train_id
-        self.repeat_cycles = repeat_cycles
+        self.max_age_s = max_age_s
         self._seq = 0
-        self._pending: list[list] = []  # [telegram, cycles left]
+        self._pending: list[tuple[VirtualBaliseTelegram, float | None]] = []  # (telegram, first sent at)
         self.stats: Counter[str] = Counter()
 
     def report_balise(
@@ -46,20 +56,36 @@ class OnboardAtpLink:
             time_ms, self.train_id, balise_group, location.track_id, location.chainage_mm, reverse,
             confidence_mm, speed_mm_s, SectionStatus(integrity), self._seq,
         )
-        self._pending.append([telegram, self.repeat_cycles])
+        self._pending.append((telegram, None))
         self.stats["telegrams"] += 1
         return telegram
 
+    @property
+    def pending(self) -> list[VirtualBaliseTelegram]:
+        return [t for t, _ in self._pending]
+
     def cycle(self, now_s: float) -> list[bytes]:
-        batch = self._pending[:MAX_TELEGRAMS_PER_CYCLE]
-        frames, _events = self.endpoint.cycle(encode_payload([t for t, _ in batch]))
-        for entry in batch:
-            entry[1] -= 1
-        self._pending = [e for e in self._pending if e[1] > 0]
+        kept = []
+        for telegram, first in self._pending:
+            if first is not None and now_s - first > self.max_age_s:
+                self.stats["expired"] += 1
+            else:
+                kept.append((telegram, now_s if first is None else first))
+        self._pending = kept
+        batch = [t for t, _ in self._pending[:MAX_TELEGRAMS_PER_CYCLE]]
+        frames, _events = self.endpoint.cycle(encode_payload(batch))
         return frames
 
     def receive(self, datagram: bytes, now_s: float | None = None) -> None:
-        self.endpoint.receive(datagram)  # the ATP sends nothing we act on; RSSP-I still needs its SSRs/RSDs
+        for event in self.endpoint.receive(datagram):
+            if isinstance(event, DataReceived):
+                for msg in decode_payload(event.data, self.stats).messages:
+                    if isinstance(msg, RbcAck):
+                        acked = msg.last_report_seq & 0xFFFF
+                        before = len(self._pending)
+                        # serial-number arithmetic on the u16 sequence: acked covers everything up to it
+                        self._pending = [(t, f) for t, f in self._pending if ((acked - t.seq) & 0xFFFF) >= 0x8000]
+                        self.stats["acked"] += before - len(self._pending)
 
     @property
     def is_up(self) -> bool:
@@ -131,7 +157,9 @@ class AtpSimulator:
 
     def cycle(self, now_s: float) -> list[bytes]:
         self.now_s = now_s
-        frames, events = self.endpoint.cycle(b"")
+        # one ATP link serves one train: acknowledge the highest telegram sequence taken
+        acked = max(self._last_seq.values(), default=0)
+        frames, events = self.endpoint.cycle(encode_message(RbcAck(acked, ())))
         for event in events:
             if isinstance(event, LinkDown):
                 self._alarm(AlarmCode.LINK_LOST.name)

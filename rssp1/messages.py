@@ -96,6 +96,9 @@ class Alarm:
 
 @dataclass(frozen=True)
 class RbcAck:
+    """Acknowledgement back along a link: RBC -> centre (report seq, alarm ids), ATP -> onboard
+    (last_report_seq = highest virtual balise telegram sequence taken)."""
+
     last_report_seq: int
     alarm_ids: tuple[int, ...]
 
