@@ -8,8 +8,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from augnet.gnss.rtcm import EncodeError, Observables, encode_msm, encode_msm_batch, frame, observables_to_msm
-from augnet.gnss.rtcm.batch import crc24q_rows
-from augnet.gnss.rtcm.framing import crc24q
+from augnet.gnss.rtcm.framing import crc24q, crc24q_bytewise, crc24q_rows
 
 from ._support import assert_same_fields, pyrtcm_fields
 from .test_observables import random_observables
@@ -95,4 +94,10 @@ def test_empty_batch():
 @given(st.integers(0, 60).flatmap(lambda n: st.lists(st.binary(min_size=n, max_size=n), min_size=1, max_size=8)))
 def test_vectorised_crc_equals_table_crc(rows):
     arr = np.array([list(r) for r in rows], dtype=np.uint8).reshape(len(rows), len(rows[0]))
-    assert crc24q_rows(arr).tolist() == [crc24q(r) for r in rows]
+    assert crc24q_rows(arr).tolist() == [crc24q_bytewise(r) for r in rows]
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.binary(max_size=1029))
+def test_crc24q_numpy_path_equals_byte_loop(data):
+    assert crc24q(data) == crc24q_bytewise(data)

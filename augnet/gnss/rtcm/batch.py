@@ -24,39 +24,9 @@ import numpy as np
 
 from augnet.gnss.rtcm.errors import EncodeError
 from augnet.gnss.rtcm.fields import FIELDS
-from augnet.gnss.rtcm.framing import CRC24Q_TABLE, FRAME_OVERHEAD_BYTES, MAX_PAYLOAD_BYTES, PREAMBLE
+from augnet.gnss.rtcm.framing import FRAME_OVERHEAD_BYTES, PREAMBLE, crc24q_columns
 from augnet.gnss.rtcm.layouts import MSM_MAX_CELLS, cell_fields, msm_type, sat_fields
 from augnet.gnss.rtcm.observables import cell_presence, observables_to_fields, wavelengths
-
-_MAX_FRAME = MAX_PAYLOAD_BYTES + FRAME_OVERHEAD_BYTES
-
-
-@lru_cache(maxsize=1)
-def _crc_position_table() -> np.ndarray:
-    """T[j, b]: CRC-24Q of byte b followed by j zero bytes, j = 0 .. max frame length - 1."""
-    table = np.array(CRC24Q_TABLE, dtype=np.uint32)
-    out = np.empty((_MAX_FRAME, 256), dtype=np.uint32)
-    z = table.copy()  # CRC of the single byte b (initial value 0)
-    for j in range(_MAX_FRAME):
-        out[j] = z
-        z = ((z << 8) & 0xFFFFFF) ^ table[z >> 16]  # one more zero byte
-    return out
-
-
-def crc24q_columns(cols: np.ndarray) -> np.ndarray:
-    """CRC-24Q of each column of an (L, n) uint8 array (byte position major), vectorised over columns."""
-    length, n = cols.shape
-    if length == 0:
-        return np.zeros(n, dtype=np.uint32)
-    t = _crc_position_table()
-    contrib = t[(length - 1 - np.arange(length))[:, None], cols]
-    return np.bitwise_xor.reduce(contrib, axis=0)
-
-
-def crc24q_rows(rows: np.ndarray) -> np.ndarray:
-    """CRC-24Q of each row of an (n, L) uint8 array."""
-    return crc24q_columns(np.ascontiguousarray(np.asarray(rows, dtype=np.uint8).T))
-
 
 @dataclass(frozen=True)
 class EncodedBatch:

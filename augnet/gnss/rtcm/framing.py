@@ -13,13 +13,17 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
+
+import numpy as np
 
 PREAMBLE = 0xD3  # RTCM 10403.3 Table 4-1
 HEADER_BYTES = 3  # preamble + 6 reserved bits + 10-bit length
 CRC_BYTES = 3
 MAX_PAYLOAD_BYTES = 1023  # 10-bit length field
 FRAME_OVERHEAD_BYTES = HEADER_BYTES + CRC_BYTES
+MAX_FRAME_BYTES = MAX_PAYLOAD_BYTES + FRAME_OVERHEAD_BYTES
 
 # CRC-24Q generator polynomial (Qualcomm), RTCM 10403.3 section 4.2:
 # x^24 + x^23 + x^18 + x^17 + x^14 + x^11 + x^10 + x^7 + x^6 + x^5 + x^4 + x^3 + x + 1
@@ -42,12 +46,51 @@ def _crc24q_table() -> tuple[int, ...]:
 CRC24Q_TABLE: tuple[int, ...] = _crc24q_table()
 
 
-def crc24q(data: bytes, crc: int = 0) -> int:
-    """CRC-24Q of ``data`` (initial value 0, no final XOR), table driven."""
+# Below this length the byte loop beats numpy's call overhead (measured: equal at ~100 bytes;
+# at 330 bytes numpy takes 20 us, the loop 70 us).
+_CRC_NUMPY_MIN_BYTES = 128
+
+
+def crc24q(data: bytes) -> int:
+    """CRC-24Q of ``data`` (initial value 0, no final XOR)."""
+    if len(data) >= _CRC_NUMPY_MIN_BYTES and len(data) <= MAX_FRAME_BYTES:
+        return int(crc24q_columns(np.frombuffer(bytes(data), dtype=np.uint8)[:, None])[0])
+    return crc24q_bytewise(data)
+
+
+def crc24q_bytewise(data: bytes, crc: int = 0) -> int:
+    """CRC-24Q, the classic table-driven byte loop (the reference the vectorised forms are tested on)."""
     table = CRC24Q_TABLE
     for b in data:
         crc = ((crc << 8) & CRC24Q_MASK) ^ table[(crc >> 16) ^ b]
     return crc
+
+
+@lru_cache(maxsize=1)
+def _crc_position_table() -> np.ndarray:
+    """T[j, b]: CRC-24Q of byte b followed by j zero bytes, j = 0 .. max frame length - 1."""
+    table = np.array(CRC24Q_TABLE, dtype=np.uint32)
+    out = np.empty((MAX_FRAME_BYTES, 256), dtype=np.uint32)
+    z = table.copy()  # CRC of the single byte b (initial value 0)
+    for j in range(MAX_FRAME_BYTES):
+        out[j] = z
+        z = ((z << 8) & 0xFFFFFF) ^ table[z >> 16]  # one more zero byte
+    return out
+
+
+def crc24q_columns(cols: np.ndarray) -> np.ndarray:
+    """CRC-24Q of each column of an (L, n) uint8 array (byte position major), vectorised over columns."""
+    length, n = cols.shape
+    if length == 0:
+        return np.zeros(n, dtype=np.uint32)
+    t = _crc_position_table()
+    contrib = t[(length - 1 - np.arange(length))[:, None], cols]
+    return np.bitwise_xor.reduce(contrib, axis=0)
+
+
+def crc24q_rows(rows: np.ndarray) -> np.ndarray:
+    """CRC-24Q of each row of an (n, L) uint8 array."""
+    return crc24q_columns(np.ascontiguousarray(np.asarray(rows, dtype=np.uint8).T))
 
 
 class FramingError(ValueError):
