@@ -1,0 +1,101 @@
+"""End to end over real loopback sockets: stand-in centre -> RSSP-I -> RBC simulator, time to alarm;
+the TCP framing and reconnection."""
+
+from __future__ import annotations
+
+import asyncio
+import random
+
+import pytest
+
+from rssp1.config import LinkTiming
+from rssp1.endpoint import DataReceived, Endpoint, LinkUp
+from rssp1.frames import MAX_FRAME_BYTES
+from rssp1.loopback import DEMO_CENTRE, DEMO_RBC, time_to_alarm
+from rssp1.transport import EndpointNode, LengthPrefixedDecoder, StreamOutOfStep, TcpLink, length_prefixed
+
+FIELD = LinkTiming(cycle_s=0.25, delta_time=3, life_time=4, delay_time=3)
+FAST = LinkTiming(cycle_s=0.1, delta_time=3, life_time=4, delay_time=3)
+TIME_TO_ALARM_LIMIT_S = 1.0  # issue 7
+
+
+@pytest.mark.timeout(60)
+def test_time_to_alarm_over_udp_with_field_timing():
+    result = asyncio.run(time_to_alarm(FIELD, transport="udp"))
+    # The alarm rides the centre's next cycle: at most one cycle plus scheduling; the cycle count is
+    # the robust check on a loaded machine, the measured time the requirement.
+    assert result.centre_cycles <= 2, result
+    assert result.time_to_alarm_s <= TIME_TO_ALARM_LIMIT_S, result
+    assert result.rbc_stats.get("alarm_link_lost", 0) == 0
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("transport,sealed", [("udp", True), ("tcp", False)], ids=["udp-sealed", "tcp"])
+def test_time_to_alarm_sealed_and_over_tcp(transport, sealed):
+    result = asyncio.run(time_to_alarm(FAST, transport=transport, sealed=sealed))
+    assert result.centre_cycles <= 2 and result.time_to_alarm_s <= TIME_TO_ALARM_LIMIT_S, result
+
+
+@pytest.mark.timeout(60)
+def test_correction_age_watchdog_over_udp():
+    result = asyncio.run(time_to_alarm(FAST, fault="corrections"))
+    # counted from the moment the age passes the limit: the next report or the RBC's next cycle
+    assert result.time_to_alarm_s <= TIME_TO_ALARM_LIMIT_S, result
+
+
+@pytest.mark.timeout(60)
+def test_link_loss_alarm_over_udp():
+    result = asyncio.run(time_to_alarm(FAST, fault="link"))
+    # DelayTime whole cycles without a frame, measured from a random phase: (3, 4] cycles
+    assert result.time_to_alarm_s <= (FAST.delay_time + 1) * FAST.cycle_s + 0.5, result
+
+
+def test_length_prefixed_stream_in_odd_splits():
+    rng = random.Random(1)
+    frames = [bytes(rng.getrandbits(8) for _ in range(rng.randrange(1, 200))) for _ in range(50)]
+    stream = b"".join(length_prefixed(f) for f in frames)
+    for split in (1, 2, 3, 7, 64, len(stream)):
+        dec = LengthPrefixedDecoder()
+        out = []
+        for i in range(0, len(stream), split):
+            out += dec.feed(stream[i : i + split])
+        assert out == frames
+    with pytest.raises(StreamOutOfStep):
+        LengthPrefixedDecoder().feed((MAX_FRAME_BYTES + 1).to_bytes(2, "little"))
+    with pytest.raises(StreamOutOfStep):
+        LengthPrefixedDecoder().feed(b"\0\0")
+
+
+@pytest.mark.timeout(60)
+def test_tcp_reconnects_and_rssp1_resynchronises():
+    async def scenario():
+        got: list = []
+        server_ep, client_ep = Endpoint(DEMO_RBC, DEMO_CENTRE, FAST), Endpoint(DEMO_CENTRE, DEMO_RBC, FAST)
+        server = TcpLink(EndpointNode(server_ep, on_event=lambda e, t: got.append(e)), FAST.cycle_s)
+        client = TcpLink(EndpointNode(client_ep, payload=lambda: b"hello"), FAST.cycle_s)
+        addr = await server.serve("127.0.0.1", 0)
+        await client.connect(*addr)
+        tasks = [asyncio.create_task(server.run()), asyncio.create_task(client.run())]
+        try:
+            for _ in range(200):
+                await asyncio.sleep(0.02)
+                if server_ep.is_up:
+                    break
+            assert server_ep.is_up
+            server._writer.close()  # the bearer breaks
+            await asyncio.sleep(1.0)
+            for _ in range(200):
+                await asyncio.sleep(0.02)
+                if sum(isinstance(e, LinkUp) for e in got) == 2:
+                    break
+            assert sum(isinstance(e, LinkUp) for e in got) == 2
+            assert server.stats["connections"] == 2
+            assert any(isinstance(e, DataReceived) and e.data == b"hello" for e in got)
+        finally:
+            await client.close()
+            await server.close()
+            for t in tasks:
+                t.cancel()
+            await asyncio.gather(*tasks, return_exceptions=True)
+
+    asyncio.run(scenario())
