@@ -7,9 +7,11 @@ Representation (one choice, used everywhere in augnet):
 Why: GPST is continuous (no leap seconds), Galileo System Time is steered to it (offset of a few ns,
 broadcast, ignored here) and BeiDou Time is GPST - 14 s exactly, so every system's time is one
 subtraction away and times vectorise as plain numpy arrays.  Precision: float64 resolves 2.4e-7 s
-at 1.4e9 s (the 2020s); a time tag error that small moves a satellite by < 1 mm and a range by
-< 0.3 mm, below anything augnet computes.  RINEX epochs (0.1 us resolution) written from GPST
-seconds are rounded to 7 decimals; epochs on multiples of a microsecond round-trip exactly.
+at 1.4e9 s (the 2020s), so a time is held to +-0.12 us; that moves a satellite by < 0.5 mm and a
+range by < 0.1 mm.  Where small differences matter (transit time, finite differences) the
+ephemeris code adds them after subtracting toe (`satellite_state(..., offset_s=)`), at full
+precision.  RINEX epochs (0.1 us digits) are written rounded to 7 decimals; whole, 0.1 s and
+0.5 ms epochs print exactly, and write -> read returns the same float.
 
 UTC: GPST - UTC = number of leap seconds since 1980 (18 s from 2017-01-01 on; IERS Bulletin C).
 """

@@ -173,8 +173,9 @@ def _decode_record(block: list[str], path, line_no: int) -> Ephemeris:
     else:
         week = week_file
         toc_week_seconds = toc_label
-    toc = toc_week_seconds - week * SECONDS_PER_WEEK  # may fall outside [0, week) near a roll-over
-    toc = float(gtime.resolve_tow(toc % SECONDS_PER_WEEK, d[11]))
+    # Stored as broadcast: seconds of week in [0, 604800); Ephemeris.toc_gpst puts it in the week
+    # nearest toe (toc and toe can straddle a week roll-over).
+    toc = float((toc_week_seconds - week * SECONDS_PER_WEEK) % SECONDS_PER_WEEK)
     common = dict(
         system=system, prn=prn, week=week, toe=d[11], toc=toc, af0=d[0], af1=d[1], af2=d[2],
         iode=int(d[3]), crs=d[4], delta_n=d[5], m0=d[6], cuc=d[7], e=d[8], cus=d[9], sqrt_a=d[10],
