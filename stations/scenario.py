@@ -153,7 +153,7 @@ class Troposphere(_Strict):
     enabled: bool = True
     # Residual zenith wet delay (truth minus model), spatially correlated [m]
     wet_residual_m: float = Field(default=0.01, ge=0.0, le=0.3)
-    wet_residual_scale_km: float = Field(default=60.0, ge=5.0, le=2000.0)
+    wet_residual_scale_km: float = Field(default=150.0, ge=5.0, le=2000.0)
 
 
 class OrbitClock(_Strict):
