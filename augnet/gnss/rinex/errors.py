@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import gzip
+import math
 import io
 import os
 from pathlib import Path
@@ -55,9 +56,12 @@ def parse_float(text: str, path, line_no: int, what: str, blank: float = 0.0) ->
     if not s:
         return blank
     try:
-        return float(s.replace("D", "E").replace("d", "e"))
+        v = float(s.replace("D", "E").replace("d", "e"))
     except ValueError:
         raise RinexError(path, line_no, f"{what}: not a number: {s!r}") from None
+    if not math.isfinite(v):  # float() takes 'nan', 'inf' and 1E+999; RINEX has none of them
+        raise RinexError(path, line_no, f"{what}: not a finite number: {s!r}")
+    return v
 
 
 def parse_int(text: str, path, line_no: int, what: str, blank: int | None = 0) -> int:
@@ -66,7 +70,22 @@ def parse_int(text: str, path, line_no: int, what: str, blank: int | None = 0) -
         if blank is None:
             raise RinexError(path, line_no, f"{what}: missing")
         return blank
-    try:
-        return int(s)
-    except ValueError:
-        raise RinexError(path, line_no, f"{what}: not an integer: {s!r}") from None
+    body = s[1:] if s[0] in "+-" else s
+    if not is_ascii_digits(body):
+        raise RinexError(path, line_no, f"{what}: not an integer: {s!r}")
+    return int(s)
+
+
+def is_ascii_digits(text: str) -> bool:
+    """True for a non-empty run of 0-9 (str.isdigit also takes superscripts and other scripts)."""
+    return bool(text) and all("0" <= ch <= "9" for ch in text)
+
+
+def parse_sat_id(text: str, path, line_no: int, default_system: str | None = None) -> str:
+    """'G05', 'G 5', ' 5' (RINEX 2, with a default system) -> 'G05'."""
+    letter, num = text[:1], text[1:3].strip()
+    if letter == " " and default_system:
+        letter = default_system
+    if len(text) < 3 or not letter.isalpha() or not letter.isascii() or not is_ascii_digits(num):
+        raise RinexError(path, line_no, f"bad satellite id {text!r}")
+    return f"{letter}{int(num):02d}"

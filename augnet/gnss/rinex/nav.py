@@ -16,7 +16,15 @@ from typing import Iterable
 from augnet.gnss import time as gtime
 from augnet.gnss.constants import BDS_WEEK_OFFSET_FROM_GPS, GAL_WEEK_OFFSET_FROM_GPS, SECONDS_PER_WEEK
 from augnet.gnss.ephemeris import Ephemeris
-from augnet.gnss.rinex.errors import LABEL_COLUMN, RinexError, open_text_for_write, parse_float, read_lines
+from augnet.gnss.rinex.errors import (
+    LABEL_COLUMN,
+    RinexError,
+    is_ascii_digits,
+    open_text_for_write,
+    parse_float,
+    parse_sat_id,
+    read_lines,
+)
 
 ORBIT_LINES = {"G": 7, "E": 7, "C": 7, "J": 7, "I": 7, "R": 3, "S": 3}
 KEPLER_SYSTEMS = ("G", "E", "C", "J")
@@ -128,16 +136,13 @@ def _read_header(lines: list[str], path) -> tuple[NavHeader, int]:
 def _check_epoch_line(line: str, path, line_no: int) -> float:
     """Parse 'Snn yyyy mm dd hh mm ss' and return the calendar time (seconds since 1980-01-06,
     read in the satellite system's own scale)."""
-    sat = line[0:3]
-    if len(line) < FIRST_LINE_DATA_COLUMN or not sat[1:].strip().isdigit():
-        raise RinexError(path, line_no, f"bad satellite id or short epoch line: {line[:23]!r}")
+    parse_sat_id(line[0:3], path, line_no)
+    if len(line) < FIRST_LINE_DATA_COLUMN:
+        raise RinexError(path, line_no, f"short epoch line: {line!r}")
     parts = line[4:23].split()
-    if len(parts) != 6:
-        raise RinexError(path, line_no, f"bad epoch {line[4:23]!r}")
-    try:
-        y, mo, d, h, mi, s = (int(p) for p in parts)
-    except ValueError:
-        raise RinexError(path, line_no, f"bad epoch {line[4:23]!r}") from None
+    if len(parts) != 6 or not all(is_ascii_digits(p) for p in parts):
+        raise RinexError(path, line_no, f"bad epoch {line[4:23]!r} (year month day hour minute second)")
+    y, mo, d, h, mi, s = (int(p) for p in parts)
     try:
         return gtime.from_calendar(y, mo, d, h, mi, s)
     except gtime.TimeError as exc:
@@ -154,9 +159,9 @@ def _fields(line: str, start: int, count: int, path, line_no: int) -> list[float
 
 def _decode_record(block: list[str], path, line_no: int) -> Ephemeris:
     head = block[0]
-    system = head[0]
-    prn = int(head[1:3])
     toc_label = _check_epoch_line(head, path, line_no)
+    system = head[0]
+    prn = int(parse_sat_id(head[0:3], path, line_no)[1:])
     d = _fields(head, FIRST_LINE_DATA_COLUMN, 3, path, line_no)
     for k, line in enumerate(block[1:], start=1):
         d.extend(_fields(line, ORBIT_DATA_COLUMN, 4, path, line_no + k))

@@ -27,6 +27,7 @@ from augnet.gnss.rinex.errors import (
     open_text_for_write,
     parse_float,
     parse_int,
+    parse_sat_id,
     read_lines,
 )
 
@@ -169,6 +170,8 @@ def _read_header(lines: list[str], path, version: float) -> tuple[ObsHeader, int
             # such as Septentrio's channel 'X1 ', so split by column, not by blanks.
             remaining = pending_count - len(hdr.obs_types[pending_sys])
             types = [c[7 + 4 * k : 10 + 4 * k].strip() for k in range(min(OBS_TYPES_PER_LINE_V3, remaining))]
+            if "" in types:
+                raise RinexError(path, ln, f"SYS / # / OBS TYPES of {pending_sys}: fewer types than announced ({pending_count})")
             for t in types:
                 if not 2 <= len(t) <= 3 or not t[0].isalpha():
                     raise RinexError(path, ln, f"bad observation type {t!r}")
@@ -309,6 +312,8 @@ def _read_body_v3(lines: list[str], start: int, header: ObsHeader, path) -> ObsD
             raise RinexError(path, ln, f"expected an epoch line starting with '>', got {line[:20]!r}")
         flag = parse_int(line[31:32], path, ln, "epoch flag", blank=0)
         count = parse_int(line[32:35], path, ln, "number of satellites", blank=None)
+        if count < 0:
+            raise RinexError(path, ln, f"negative number of satellites {count}")
         if flag not in KEPT_FLAGS:
             if flag > 6:
                 raise RinexError(path, ln, f"epoch flag {flag} outside 0-6")
@@ -337,10 +342,10 @@ def _read_body_v3(lines: list[str], start: int, header: ObsHeader, path) -> ObsD
             raise RinexError(path, n, f"epoch at line {ln} announces {count} satellites, the file ends")
         for k in range(1, count + 1):
             sl = lines[i + k]
-            sat = sl[0:3]
-            if sat[:1] == ">" or len(sat) < 3 or not sat[1:].strip().isdigit():
-                raise RinexError(path, i + k + 1, f"bad satellite id {sat!r} (epoch at line {ln} announces {count})")
-            sat = f"{sat[0]}{int(sat[1:]):02d}"
+            try:
+                sat = parse_sat_id(sl[0:3], path, i + k + 1)
+            except RinexError:
+                raise RinexError(path, i + k + 1, f"bad satellite id {sl[0:3]!r} (epoch at line {ln} announces {count})") from None
             types = header.obs_types.get(sat[0])
             if types is None:
                 raise RinexError(path, i + k + 1, f"satellite {sat} of a system without SYS / # / OBS TYPES")
@@ -367,6 +372,8 @@ def _read_body_v2(lines: list[str], start: int, header: ObsHeader, path) -> ObsD
             continue
         flag = parse_int(line[28:29], path, ln, "epoch flag", blank=0)
         count = parse_int(line[29:32], path, ln, "number of satellites", blank=None)
+        if count < 0:
+            raise RinexError(path, ln, f"negative number of satellites {count}")
         if flag not in KEPT_FLAGS:
             if flag > 6:
                 raise RinexError(path, ln, f"epoch flag {flag} outside 0-6")
@@ -397,10 +404,7 @@ def _read_body_v2(lines: list[str], start: int, header: ObsHeader, path) -> ObsD
                 if len(sats) == count:
                     break
                 s = sl[32 + 3 * k : 35 + 3 * k]
-                if len(s) < 3 or not s[1:].strip().isdigit():
-                    raise RinexError(path, i + m + 1, f"bad satellite id {s!r} in the epoch's satellite list")
-                letter = s[0] if s[0] != " " else default_sys
-                sats.append(f"{letter}{int(s[1:]):02d}")
+                sats.append(parse_sat_id(s, path, i + m + 1, default_system=default_sys))
         i += n_sat_lines
         e_i = len(col.times)
         col.times.append(t)
