@@ -67,8 +67,8 @@ def test_lock_indicators_are_conservative(t):
     assert lock_indicator_df407(t) == (704 if t >= 2**26 else lock_indicator_df407(np.floor(t)))
 
 
-def random_observables(rng, system, nsat, nsig, sat_ids=None, missing=0.2):
-    sig_codes = DEFAULT_SIGNALS[system][:nsig]
+def random_observables(rng, system, nsat, nsig, sat_ids=None, missing=0.2, sig_codes=None):
+    sig_codes = DEFAULT_SIGNALS[system][:nsig] if sig_codes is None else sig_codes
     sig_ids = np.array(sorted(by_rinex(system, c).msm_id for c in sig_codes))
     sat_ids = np.array(sorted(rng.choice(np.arange(1, 64), nsat, replace=False))) if sat_ids is None else sat_ids
     lam = wavelengths(system, sig_ids)

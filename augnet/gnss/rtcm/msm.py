@@ -309,45 +309,52 @@ def check_msm(msg: MsmMessage) -> None:
             raise EncodeError(f"{df} ({f.what}) = {v} outside [{f.raw_min}, {f.raw_max}]")
     if not 0 <= msg.epoch < (1 << 30):
         raise EncodeError(f"MSM epoch field {msg.epoch} does not fit 30 bits")
-    for group, count in ((sat_fields(msg.system, msg.level), len(sat)), (cell_fields(msg.level), ncell)):
+    for role, df, arr, count in _body(msg, len(sat), ncell):
+        if arr is None:
+            if role == "ext_info":
+                continue  # reserved: zeros
+            raise EncodeError(f"MSM{msg.level} needs {role} ({df})")
+        if arr.shape != (count,):
+            raise EncodeError(f"{role} ({df}) has shape {arr.shape}, expected ({count},)")
+        f = FIELDS[df]
+        if count and (arr.min() < f.raw_min or arr.max() > f.raw_max):
+            raise EncodeError(f"{role} ({df}, {f.what}) outside [{f.raw_min}, {f.raw_max}]")
+
+
+def _body(msg: MsmMessage, nsat: int, ncell: int):
+    """(role, DF, array or None, expected length) of the satellite then cell fields, in order."""
+    for group, count in ((sat_fields(msg.system, msg.level), nsat), (cell_fields(msg.level), ncell)):
         for role, df in group:
             arr = getattr(msg, role)
-            if arr is None:
-                if role == "ext_info":
-                    continue  # reserved: zeros
-                raise EncodeError(f"MSM{msg.level} needs {role} ({df})")
-            arr = np.asarray(arr)
-            if arr.shape != (count,):
-                raise EncodeError(f"{role} ({df}) has shape {arr.shape}, expected ({count},)")
-            f = FIELDS[df]
-            if count and (arr.min() < f.raw_min or arr.max() > f.raw_max):
-                raise EncodeError(f"{role} ({df}, {f.what}) outside [{f.raw_min}, {f.raw_max}]")
+            yield role, df, (None if arr is None else np.asarray(arr)), count
+
+
+_BIT_SHIFTS = {w: np.arange(w - 1, -1, -1, dtype=np.int64) for w in range(1, 33)}
 
 
 def encode_msm(msg: MsmMessage) -> bytes:
-    """The payload of one MSM (raises ``EncodeError`` on inconsistent or out-of-range values)."""
+    """The payload of one MSM (raises ``EncodeError`` on inconsistent or out-of-range values).
+
+    A straightforward bit writer, independent of the batch packer (which tests compare it with):
+    the header as one Python integer, then each field array spread to a (n, width) bit matrix.
+    """
     check_msm(msg)
+    nsat, nsig, ncell = msg.nsat, msg.nsig, msg.ncell
     acc = msg.msg_type
-    acc = (acc << 12) | msg.station_id
-    acc = (acc << 30) | msg.epoch
-    for v, w in ((msg.multiple, 1), (msg.iods, 3), (msg.reserved, 7), (msg.clock_steering, 2),
-                 (msg.external_clock, 2), (msg.smoothing, 1), (msg.smoothing_interval, 3),
-                 (msg.sat_mask, 64), (msg.sig_mask, 32)):
+    for v, w in ((msg.station_id, 12), (msg.epoch, 30), (msg.multiple, 1), (msg.iods, 3), (msg.reserved, 7),
+                 (msg.clock_steering, 2), (msg.external_clock, 2), (msg.smoothing, 1),
+                 (msg.smoothing_interval, 3), (msg.sat_mask, 64), (msg.sig_mask, 32),
+                 (msg.cell_mask_bits, nsat * nsig)):
         acc = (acc << w) | v
-    ncellbits = msg.nsat * msg.nsig
-    acc = (acc << ncellbits) | msg.cell_mask_bits
-    nbits = HEADER_BITS_BEFORE_CELL_MASK + ncellbits
-    for group, count in ((sat_fields(msg.system, msg.level), msg.nsat), (cell_fields(msg.level), msg.ncell)):
-        for role, df in group:
-            w = FIELDS[df].width
-            arr = getattr(msg, role)
-            values = [0] * count if arr is None else np.asarray(arr).tolist()
-            m = (1 << w) - 1
-            for v in values:
-                acc = (acc << w) | (v & m)
-            nbits += w * count
-    pad = -nbits % 8
-    return (acc << pad).to_bytes((nbits + pad) // 8, "big")
+    nhead = HEADER_BITS_BEFORE_CELL_MASK + nsat * nsig
+    head = np.unpackbits(np.frombuffer(acc.to_bytes((nhead + 7) // 8, "big"), dtype=np.uint8))
+    bits = [head[len(head) - nhead :]]
+    for _, df, arr, count in _body(msg, nsat, ncell):
+        if arr is None:
+            arr = np.zeros(count, dtype=np.int64)
+        # arithmetic shift of int64 gives the two's complement bits of negative values
+        bits.append(((arr.astype(np.int64)[:, None] >> _BIT_SHIFTS[FIELDS[df].width]) & 1).astype(np.uint8).ravel())
+    return np.packbits(np.concatenate(bits)).tobytes()
 
 
 def make_msm(system: str, level: int, **kwargs) -> MsmMessage:
