@@ -140,3 +140,28 @@ def test_unknown_type_passes_through():
     payload = bytes([0x3F, 0xE0]) + bytes(10)  # 1022: not interpreted
     msg = decode(payload)
     assert msg.msg_type == 1022 and encode(msg) == payload
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.sampled_from(SUPPORTED_TYPES), st.binary(max_size=200))
+def test_decode_of_arbitrary_payload_raises_only_decode_error(msg_type, body):
+    # A CRC can be valid over garbage (a buggy sender); decoding must fail cleanly, never crash.
+    payload = bytes([msg_type >> 4, ((msg_type & 0xF) << 4) | (body[0] >> 4 if body else 0)]) + body[1:]
+    try:
+        msg = decode(payload)
+    except DecodeError:
+        return
+    assert msg.msg_type == msg_type
+
+
+def test_message_reader_counts_undecodable_frames():
+    from augnet.gnss.rtcm import MessageReader, frame
+
+    good = encode_frame(_example_msm(1077))
+    short = frame(good[3:40])  # a CRC-valid frame holding a truncated 1077
+    r = MessageReader()
+    msgs = r.feed(b"\x00junk" + short + good + good[:10])
+    msgs += r.close()
+    assert [m.msg_type for m in msgs] == [1077]
+    assert r.decode_errors == 1 and "1077" in r.last_error
+    assert r.frames.stats.frames_ok == 2 and r.frames.stats.truncated_bytes == 10

@@ -7,6 +7,7 @@ Which function to call:
         reader = RtcmStreamReader()
         for fr in reader.feed(chunk): ...        # Frame(msg_type, payload, raw); reader.stats counts
         read_frames(path)                        # a whole file, with stats and any truncated tail
+        MessageReader().feed(chunk)              # frames and decode in one step; bad payloads counted
 
 (b) decode any frame or payload::
 
@@ -38,6 +39,7 @@ own time scale: BDT for BeiDou; day-of-week << 27 | tk for GLONASS).
 from augnet.gnss.rtcm.batch import EncodedBatch, encode_msm_batch
 from augnet.gnss.rtcm.codec import (
     Message,
+    MessageReader,
     RtcmMessage,
     UnknownMessage,
     decode,
@@ -61,7 +63,7 @@ from augnet.gnss.rtcm.observables import (
 )
 
 __all__ = [
-    "DecodeError", "EncodeError", "EncodedBatch", "Frame", "Message", "MsmMessage", "Observables",
+    "DecodeError", "EncodeError", "EncodedBatch", "Frame", "Message", "MessageReader", "MsmMessage", "Observables",
     "RtcmMessage", "RtcmStreamReader", "SUPPORTED_TYPES", "StreamStats", "UnknownMessage", "crc24q",
     "decode", "decode_msm", "encode", "encode_frame", "encode_msm", "encode_msm_batch", "frame",
     "iter_frames", "lock_indicator_df402", "lock_indicator_df407", "lock_time_df402", "lock_time_df407",

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 from augnet.gnss.rtcm.errors import DecodeError, EncodeError
 from augnet.gnss.rtcm.fields import FIELDS, Kind, decode_raw, encode_raw, from_value, to_value
-from augnet.gnss.rtcm.framing import Frame, frame, message_type
+from augnet.gnss.rtcm.framing import Frame, RtcmStreamReader, frame, message_type
 from augnet.gnss.rtcm.layouts import LAYOUTS, Repeat, msm_kind
 from augnet.gnss.rtcm.msm import MsmMessage, decode_msm, encode_msm
 
@@ -159,7 +159,37 @@ def encode_frame(msg: Message) -> bytes:
     return frame(encode(msg))
 
 
+class MessageReader:
+    """Sans-IO bytes -> decoded messages: frames from ``RtcmStreamReader``, then ``decode``.
+
+    Never raises on input: a CRC-valid frame whose payload does not hold its message is counted in
+    ``decode_errors`` (with the last error kept for the operator) and skipped.
+    """
+
+    def __init__(self) -> None:
+        self.frames = RtcmStreamReader()
+        self.decode_errors = 0
+        self.last_error: str | None = None
+
+    def feed(self, data: bytes) -> list[Message]:
+        return self._decode_all(self.frames.feed(data))
+
+    def close(self) -> list[Message]:
+        return self._decode_all(self.frames.close())
+
+    def _decode_all(self, frames: list[Frame]) -> list[Message]:
+        out: list[Message] = []
+        for fr in frames:
+            try:
+                out.append(decode(fr.payload))
+            except DecodeError as err:
+                self.decode_errors += 1
+                self.last_error = str(err)
+        return out
+
+
 __all__ = [
+    "MessageReader",
     "DecodeError", "EncodeError", "Kind", "Message", "MsmMessage", "RtcmMessage", "UnknownMessage",
     "decode", "decode_fixed", "encode", "encode_fixed", "encode_frame", "text_fields",
 ]
