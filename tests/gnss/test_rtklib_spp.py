@@ -52,7 +52,7 @@ def _rtklib_group_delay(nav: NavigationData, sat: str, code: str) -> float:
     return float(group_delay_s(tb.take([first]), code)[0])
 
 
-def _simulate(nav: NavigationData, system: str, receiver_ecef, epochs_gpst):
+def _simulate(nav: NavigationData, system: str, receiver_ecef, epochs_gpst, *, with_group_delay=True):
     """Error-free pseudoranges: (times as receiver time tags, sats, (E, S) pseudoranges, used)."""
     sats = [s for s in nav.satellites if s[0] == system]
     tr = transit(nav, sats, receiver_ecef, epochs_gpst)
@@ -61,7 +61,7 @@ def _simulate(nav: NavigationData, system: str, receiver_ecef, epochs_gpst):
     healthy = tr.valid & (rows.health == 0)
     visible = healthy & (np.degrees(np.nan_to_num(el, nan=-90.0)) > ELEVATION_MASK_DEG)
     code = SIGNAL[system]
-    gd = np.array([_rtklib_group_delay(nav, s, code) for s in sats])
+    gd = np.array([_rtklib_group_delay(nav, s, code) for s in sats]) if with_group_delay else np.zeros(len(sats))
     pr = tr.range_m + SPEED_OF_LIGHT_M_S * (RECEIVER_CLOCK_S - tr.sat_clock_bias_s + gd[None, :])
     pr = np.where(visible, pr, np.nan)
     return np.asarray(epochs_gpst) + RECEIVER_CLOCK_S, np.array(sats), pr, visible
@@ -132,9 +132,14 @@ def _run_rnx2rtkp(tmp_path: Path, system: str, obs: Path, nav_file: Path):
     return sols, used
 
 
-def _check(tmp_path, nav_path, system, receiver_ecef, epochs, need_geo=False):
+def _check(tmp_path, nav_path, system, receiver_ecef, epochs, need_geo=False, sabotage=None):
     nav = NavigationData(read_nav(nav_path).ephemerides, galileo_source="inav", allow_unhealthy=True)
-    times, sats, pr, visible = _simulate(nav, system, receiver_ecef, epochs)
+    with_group_delay = True
+    if sabotage == "no-geo-rotation":
+        nav.table.is_geo[:] = False  # compute BDS GEOs like IGSO/MEO satellites
+    elif sabotage == "no-group-delay":
+        with_group_delay = False
+    times, sats, pr, visible = _simulate(nav, system, receiver_ecef, epochs, with_group_delay=with_group_delay)
     assert visible.sum(axis=1).min() >= 5, f"too few {system} satellites: {visible.sum(axis=1)}"
     obs = tmp_path / f"sim-{system}.obs"
     _write_obs(obs, system, receiver_ecef, times, sats, pr)
@@ -176,3 +181,13 @@ def test_rnx2rtkp_single_point_bds_with_geo(tmp_path, shared_data):
     epochs = gtime.from_calendar(2024, 6, 24, 8, 20, 0) + np.arange(0.0, 300.0, 60.0)
     errors, used = _check(tmp_path, nav_path, "C", site, epochs, need_geo=True)
     print(f"C with GEO: max 3-D error {errors.max() * 1000:.2f} mm; used {sorted(used)}")
+
+
+@pytest.mark.parametrize("sabotage", ["no-group-delay", "no-geo-rotation"])
+def test_the_comparison_detects_a_wrong_model(tmp_path, shared_data, sabotage):
+    """Negative control: leave out the BDS TGD1 or the GEO rotation and RTKLIB disagrees."""
+    nav_path = shared_data / "rinex" / "static-1m-2024" / "base.nav"
+    site = geodetic_deg_to_ecef(35.134707705, 136.977577939, 104.853)
+    epochs = gtime.from_calendar(2024, 6, 24, 8, 20, 0) + np.arange(0.0, 300.0, 100.0)
+    with pytest.raises(AssertionError):
+        _check(tmp_path, nav_path, "C", site, epochs, need_geo=True, sabotage=sabotage)
