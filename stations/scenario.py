@@ -300,8 +300,8 @@ IONOSPHERE_PRESETS: dict[str, dict[str, float]] = {
     "active": dict(vtec_tecu=30.0, gradient_tecu_per_1000km=12.0, irregularity_tecu=1.5,
                    irregularity_scale_km=300.0, tid_amplitude_tecu=0.5, tid_wavelength_km=200.0,
                    tid_period_min=30.0),
-    "storm": dict(vtec_tecu=60.0, gradient_tecu_per_1000km=40.0, irregularity_tecu=5.0,
-                  irregularity_scale_km=250.0, tid_amplitude_tecu=2.0, tid_wavelength_km=200.0,
+    "storm": dict(vtec_tecu=60.0, gradient_tecu_per_1000km=25.0, irregularity_tecu=3.0,
+                  irregularity_scale_km=250.0, tid_amplitude_tecu=1.2, tid_wavelength_km=200.0,
                   tid_period_min=25.0),
 }
 

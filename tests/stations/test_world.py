@@ -1,0 +1,233 @@
+"""Each error term is real: switched off, the matching combination goes flat; switched on, it has
+the size the scenario states.  Trains follow the track; tunnels break lock; same seed, same data."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
+from stations.diagnostics import dd_ionosphere_ppm, dd_truth
+from stations.scenario import load_scenario
+from stations.world import World
+
+C = SPEED_OF_LIGHT_M_S
+
+
+def _scenario(name="baseline-10km", duration=120.0, **errors):
+    sc = load_scenario(name)
+    e = sc.errors
+    parts = {}
+    for key, val in errors.items():
+        if isinstance(val, dict):
+            parts[key] = getattr(e, key).model_copy(update=val)
+        else:
+            parts[key] = val
+    return sc.model_copy(update=dict(duration_s=duration, errors=e.model_copy(update=parts)))
+
+
+OFF = dict(ionosphere={"level": "off"}, troposphere={"enabled": False}, orbit_clock={"enabled": False},
+           noise={"enabled": False}, receiver_clock=False)
+
+
+def _run(sc, block=60):
+    w = World(sc)
+    return w, w.run(block)
+
+
+def _cat(blocks, name):
+    return np.concatenate([getattr(b, name) for b in blocks])
+
+
+def _model_range(blocks):
+    """rho + c (dt_r - dt^s) per (E, R, N): the non-dispersive part without troposphere."""
+    rng = _cat(blocks, "range_m")
+    return rng + C * (_cat(blocks, "rx_clock_s")[:, :, None] - _cat(blocks, "sat_clock_s"))
+
+
+def test_all_errors_off_is_exact():
+    w, bl = _run(_scenario(**OFF))
+    P, L, obs = _cat(bl, "pseudorange_m"), _cat(bl, "phase_cyc"), _cat(bl, "observed")
+    model = _model_range(bl)[..., None]
+    assert obs.sum() > 1000
+    assert np.nanmax(np.abs(P - model)) < 1e-6
+    amb = _cat(bl, "ambiguity_cyc")
+    resid = L - model / w.wavelength_m[None, None] - amb
+    assert np.nanmax(np.abs(resid)) < 1e-6
+    assert np.all(np.isnan(amb[~obs]))
+
+
+def test_geometry_free_phase_flat_without_ionosphere():
+    # ionosphere off, everything else on: L1 - L2 geometry-free (metres) constant per arc up to noise
+    sc = _scenario(ionosphere={"level": "off"}, noise={"multipath": False})
+    w, bl = _run(sc)
+    L = _cat(bl, "phase_cyc") * w.wavelength_m[None, None]
+    gf = L[..., 0] - L[..., 1]
+    seen = ~np.isnan(gf).all(axis=0)
+    gf = gf[:, seen]
+    dev = gf - np.nanmean(gf, axis=0, keepdims=True)  # no slips in this scenario: one arc each
+    assert np.nanstd(dev) < 0.006  # ~sqrt(2) x phase noise, metres
+    # and with the ionosphere on the same combination moves by centimetres over two minutes
+    w2, bl2 = _run(_scenario(noise={"multipath": False}))
+    L2 = _cat(bl2, "phase_cyc") * w2.wavelength_m[None, None]
+    gf2 = L2[..., 0] - L2[..., 1]
+    gf2 = gf2[:, ~np.isnan(gf2).all(axis=0)]
+    span = np.nanmax(gf2, axis=0) - np.nanmin(gf2, axis=0)
+    assert np.nanmedian(span) > 0.01
+
+
+def test_code_and_phase_diverge_by_twice_the_ionosphere():
+    sc = _scenario(troposphere={"enabled": False}, orbit_clock={"enabled": False}, noise={"enabled": False},
+                   receiver_clock=False)
+    w, bl = _run(sc)
+    P = _cat(bl, "pseudorange_m")
+    L = _cat(bl, "phase_cyc") * w.wavelength_m[None, None]
+    amb = _cat(bl, "ambiguity_cyc") * w.wavelength_m[None, None]
+    iono = 40.3e16 * _cat(bl, "stec_tecu")[..., None] / w.freq_hz[None, None] ** 2
+    assert np.nanmax(np.abs((P - (L - amb)) - 2 * iono)) < 1e-5
+    # dispersive: the L2 delay is (f1/f2)^2 times the L1 delay
+    g = _cat(bl, "observed")[..., 0] & (w.sat_system == "G")[None, None]
+    ratio = (P[..., 1] - _model_range(bl))[g] / (P[..., 0] - _model_range(bl))[g]
+    assert np.allclose(ratio, (1575.42 / 1227.60) ** 2, rtol=1e-6)
+
+
+def test_troposphere_is_non_dispersive_and_only_when_on():
+    base = dict(ionosphere={"level": "off"}, orbit_clock={"enabled": False}, noise={"enabled": False},
+                receiver_clock=False)
+    w, bl = _run(_scenario(**base))
+    P = _cat(bl, "pseudorange_m")
+    tropo = _cat(bl, "tropo_m")
+    resid = P - _model_range(bl)[..., None]
+    assert np.nanmax(np.abs(resid[..., 0] - tropo)) < 1e-6
+    assert np.nanmax(np.abs(resid[..., 0] - resid[..., 1])) < 1e-6  # same on both frequencies
+    el = _cat(bl, "elevation_rad")
+    obs = _cat(bl, "observed")[..., 0]
+    # 2.3-2.5 m at zenith near sea level, ~7-9 m at 15 deg
+    hi = obs & (el > np.radians(75))
+    assert np.all((tropo[hi] > 2.3) & (tropo[hi] < 2.6))
+    low = obs & (el > np.radians(14)) & (el < np.radians(16))
+    assert np.all((tropo[low] > 8.0) & (tropo[low] < 10.5))
+    w2, bl2 = _run(_scenario(troposphere={"enabled": False}, **base))
+    resid2 = _cat(bl2, "pseudorange_m") - _model_range(bl2)[..., None]
+    assert np.nanmax(np.abs(resid2)) < 1e-6
+
+
+def test_noise_and_multipath_levels():
+    w, bl = _run(_scenario(ionosphere={"level": "off"}, troposphere={"enabled": False},
+                           orbit_clock={"enabled": False}, receiver_clock=False, duration=300))
+    el = _cat(bl, "elevation_rad")
+    P = _cat(bl, "pseudorange_m")
+    err = P - _model_range(bl)[..., None]
+    hi = _cat(bl, "observed")[..., 0] & (el > np.radians(60))
+    sd = np.std(err[..., 0][hi])
+    assert 0.2 < sd < 0.5  # code ~0.3 m near zenith (geodetic grade)
+    # multipath is correlated in time (AR(1), minutes for a static antenna); white noise is not
+    mp = _cat(bl, "multipath_code_m")[..., 0]
+    a, b = mp[1:][hi[1:] & hi[:-1]], mp[:-1][hi[1:] & hi[:-1]]
+    assert np.corrcoef(a, b)[0, 1] > 0.95
+    w0, bl0 = _run(_scenario(ionosphere={"level": "off"}, troposphere={"enabled": False},
+                             orbit_clock={"enabled": False}, receiver_clock=False,
+                             noise={"multipath": False}, duration=60))
+    assert np.all(_cat(bl0, "multipath_code_m") == 0.0)
+
+
+def test_orbit_and_clock_errors_have_stated_size():
+    w, bl = _run(_scenario(duration=60))
+    orb = _cat(bl, "orbit_error_range_m")[_cat(bl, "observed")[..., 0]]
+    clk = _cat(bl, "sat_clock_error_s")[_cat(bl, "observed")[..., 0]]
+    assert 0.05 < np.std(orb) < 1.0  # decimetres along the line of sight
+    assert 0.2e-9 < np.std(clk) < 3e-9  # about a nanosecond
+    w0, bl0 = _run(_scenario(orbit_clock={"enabled": False}, duration=30))
+    assert np.all(_cat(bl0, "orbit_error_range_m") == 0) and np.all(_cat(bl0, "sat_clock_error_s") == 0)
+
+
+@pytest.mark.parametrize("name,a,b,lo,hi", [("network-70km", "NORTH", "SOUTH", 1.0, 4.0),
+                                             ("iono-storm", "ST1", "ST2", 10.0, 20.0)])
+def test_dd_ionosphere_level(name, a, b, lo, hi):
+    sc = load_scenario(name).model_copy(update=dict(duration_s=180.0, trains=[]))
+    w = World(sc)
+    stats = dd_ionosphere_ppm(w, w.run(), a, b)
+    print(f"{name} {a}-{b}: DD L1 ionosphere {stats}")
+    assert lo <= stats["rms"] <= hi
+
+
+def test_dd_ionosphere_grows_with_baseline():
+    sc = load_scenario("network-70km").model_copy(update=dict(duration_s=60.0))
+    w = World(sc)
+    bl = w.run()
+    short = np.sqrt(np.mean(dd_truth(w, bl, "check1", "NORTH", "iono_l1_m") ** 2))
+    long = np.sqrt(np.mean(dd_truth(w, bl, "SOUTH", "NORTH", "iono_l1_m") ** 2))
+    assert long > 1.5 * short
+
+
+def test_same_seed_same_data_any_block_size():
+    sc = _scenario(duration=40, cycle_slips_per_hour=200.0)
+    _, a = _run(sc, block=60)
+    _, b = _run(sc, block=7)
+    for name in ("pseudorange_m", "phase_cyc", "doppler_hz", "lli", "ambiguity_cyc"):
+        assert np.array_equal(_cat(a, name), _cat(b, name), equal_nan=True)
+    _, c = _run(sc.model_copy(update=dict(seed=sc.seed + 1)), block=60)
+    assert not np.array_equal(_cat(a, "pseudorange_m"), _cat(c, "pseudorange_m"), equal_nan=True)
+
+
+def test_cycle_slips_change_ambiguity_and_are_flagged():
+    w, bl = _run(_scenario(duration=120, cycle_slips_per_hour=120.0))
+    amb, lli, lock = _cat(bl, "ambiguity_cyc"), _cat(bl, "lli"), _cat(bl, "lock_time_s")
+    jumped = (amb[1:] != amb[:-1]) & ~np.isnan(amb[1:]) & ~np.isnan(amb[:-1])
+    assert jumped.sum() > 5
+    assert np.all(lli[1:][jumped] & 1)
+    assert np.all(lock[1:][jumped] == 0.0)
+    # without a flag, the ambiguity never changes
+    steady = ~np.isnan(amb[1:]) & ~np.isnan(amb[:-1]) & ((lli[1:] & 1) == 0)
+    assert np.all(amb[1:][steady] == amb[:-1][steady])
+
+
+def test_half_cycle_flag_only_when_enabled():
+    w, bl = _run(_scenario(duration=20))
+    assert not np.any(_cat(bl, "lli") & 2)
+    w, bl = _run(_scenario(duration=20, half_cycle=True))
+    lli = _cat(bl, "lli")
+    assert np.any(lli[:5] & 2) and not np.any(lli[10:] & 2)
+
+
+def test_trains_follow_the_track_and_lose_lock_in_the_tunnel():
+    sc = load_scenario("demo")
+    w = World(sc)
+    bl = w.run()
+    tl = w.track
+    ecef = _cat(bl, "rx_ecef")
+    for i, rx in enumerate(w.receivers):
+        if rx.kind != "train":
+            continue
+        tr = next(t for t in sc.trains if t.id == rx.id)
+        # back from ECEF to the plane, independently of how the points were made
+        from augnet.gnss.geometry import ecef_to_geodetic
+        llh = ecef_to_geodetic(ecef[:, i])
+        enu = np.column_stack([tl.geodetic_to_plane(np.degrees(llh[:, 0]), np.degrees(llh[:, 1])), llh[:, 2]])
+        sel = slice(None, None, 25)
+        ids, s, dist = tl.nearest_track(enu[sel])
+        assert set(ids) == {rx.track_id}
+        assert np.max(dist) < 0.005  # on the polyline (mm: projection round trip)
+        assert np.allclose(s / 1e3, rx.km[sel], atol=1e-4)
+        rail = tl.point(s)[:, 2]
+        assert np.allclose(enu[sel, 2] - rail, tr.antenna_height_m, atol=0.005)
+    # G101 runs through the 2 km tunnel at km 100-102: no observations inside, new arcs after
+    i = w.receiver_ids.index("G101")
+    rx = w.receivers[i]
+    km = rx.km
+    inside = (km >= 100.0) & (km <= 102.0)
+    assert inside.any() and (km > 102.1).any()
+    obs = _cat(bl, "observed")[:, i]
+    assert not obs[inside].any()
+    before = np.flatnonzero(km < 100.0)[-1]
+    # first epoch after the exit with signals again (the epoch whose interval spans the portal
+    # is still blocked: the receiver was in the tunnel for part of it)
+    after = np.flatnonzero((km > 102.0) & obs.any(axis=(1, 2)))[0]
+    assert km[after] - 102.0 < 0.1
+    amb = _cat(bl, "ambiguity_cyc")[:, i]
+    lli = _cat(bl, "lli")[:, i]
+    both = obs[before] & obs[after]
+    assert both.sum() >= 8
+    assert np.all(lli[after][obs[after]] & 1)  # every signal re-acquired with loss of lock
+    assert np.mean(amb[after][both] != amb[before][both]) > 0.9  # new integer ambiguities
+    assert np.all(_cat(bl, "lock_time_s")[after, i][obs[after]] == 0.0)
