@@ -150,3 +150,23 @@ def test_rinex2_files(shared_data):
     for name in ("rovn0010.21o", "wsra0010.21o", "zegv0010.21o"):
         o = read_obs(folder / name)
         assert len(o.times) > 0 and np.isfinite(o.obs["C1"]).any()
+
+
+def test_rinex2_converted_to_rinex3_types_and_written(shared_data, tmp_path):
+    from augnet.gnss.rinex.obs import rinex3_type, to_rinex3_types
+
+    assert rinex3_type("G", "P2") == "C2W" and rinex3_type("G", "C1") == "C1C" and rinex3_type("R", "P1") == "C1P"
+    assert rinex3_type("G", "C7") is None
+    v2 = read_obs(shared_data / "rinex" / "nl-network-2021" / "delf0010.21o")
+    v3 = to_rinex3_types(v2)
+    assert v3.header.obs_types["G"] == ["L1C", "L2W", "C1C", "C2W", "C1W", "S1C", "S2W"]
+    assert v3.header.obs_types["R"] == ["L1C", "L2P", "C1C", "C2P", "C1P", "S1C", "S2P"]
+    gps = np.array([s[0] == "G" for s in v2.sats.tolist()])
+    assert np.array_equal(v3.obs["C2W"][:, gps], v2.obs["P2"][:, gps], equal_nan=True)
+    assert np.all(np.isnan(v3.obs["C2W"][:, ~gps]))
+    assert np.array_equal(v3.obs["C2P"][:, ~gps], v2.obs["P2"][:, ~gps], equal_nan=True)
+    out = tmp_path / "delf.rnx"
+    write_obs(out, v3)
+    back = read_obs(out)
+    assert back.header.version == 3.04
+    _assert_same(v3, back)

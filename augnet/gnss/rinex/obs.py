@@ -13,6 +13,7 @@ Times: epochs in a GPS/GAL/QZS time-system file are GPST; in a BDT file they are
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as _dt
 import math
 import os
@@ -549,3 +550,74 @@ def empty_obs(header: ObsHeader, times, sats) -> ObsData:
         {t: np.zeros(shape, dtype=np.int8) for t in types},
         {t: np.zeros(shape, dtype=np.int8) for t in types},
     )
+
+
+# --------------------------------------------------------------------------------------------
+# RINEX 2.11 observation types -> RINEX 3 types
+
+# RINEX 2.11 (section 5.1 and Table 1) names a type by observable and band only; RINEX 3 adds the
+# tracking mode.  The conventional mapping (the one gfzrnx and RTKLIB apply to 2.11 files):
+# GPS C1 is C/A, P1/P2 are P(Y) (W), C2 is L2C (tracking mode unknown: X); the L2 phase goes with
+# P2 (W).  GLONASS P is the P code.  Galileo and other bands have no mode information: X.
+_V2_TO_V3_BY_SYSTEM: dict[str, dict[str, str]] = {
+    "G": {"C1": "C1C", "P1": "C1W", "L1": "L1C", "D1": "D1C", "S1": "S1C",
+          "C2": "C2X", "P2": "C2W", "L2": "L2W", "D2": "D2W", "S2": "S2W",
+          "C5": "C5X", "L5": "L5X", "D5": "D5X", "S5": "S5X"},
+    "R": {"C1": "C1C", "P1": "C1P", "L1": "L1C", "D1": "D1C", "S1": "S1C",
+          "C2": "C2C", "P2": "C2P", "L2": "L2P", "D2": "D2P", "S2": "S2P"},
+    "E": {f"{o}{b}": f"{o}{b}X" for o in "CLDS" for b in "15678"},
+    "J": {"C1": "C1C", "L1": "L1C", "D1": "D1C", "S1": "S1C", "C2": "C2X", "L2": "L2X", "D2": "D2X",
+          "S2": "S2X", "C5": "C5X", "L5": "L5X", "D5": "D5X", "S5": "S5X"},
+    "S": {"C1": "C1C", "L1": "L1C", "D1": "D1C", "S1": "S1C", "C5": "C5X", "L5": "L5X", "D5": "D5X", "S5": "S5X"},
+    "C": {"C2": "C2I", "L2": "L2I", "D2": "D2I", "S2": "S2I", "C7": "C7I", "L7": "L7I", "D7": "D7I",
+          "S7": "S7I", "C6": "C6I", "L6": "L6I", "D6": "D6I", "S6": "S6I"},
+}
+
+
+def rinex3_type(system: str, v2_type: str) -> str | None:
+    """RINEX 3 type for a RINEX 2.11 type of a system ('G', 'P2' -> 'C2W'); None if it has none."""
+    return _V2_TO_V3_BY_SYSTEM.get(system, {}).get(v2_type)
+
+
+def to_rinex3_types(data: ObsData) -> ObsData:
+    """The same observations under RINEX 3 type names (see `rinex3_type`), per system.
+
+    Types without a RINEX 3 equivalent for a system (e.g. GPS 'P1' of a GLONASS-only receiver is
+    fine, but 'C6' for GPS) are dropped and listed in a header comment.  RINEX 3 input is
+    returned unchanged.
+    """
+    if all(len(t) == 3 for ts in data.header.obs_types.values() for t in ts):
+        return data
+    n_e, n_s = len(data.times), len(data.sats)
+    letters = np.array([s[0] for s in data.sats.tolist()]) if n_s else np.array([], dtype="<U1")
+    new_types: dict[str, list[str]] = {}
+    obs: dict[str, np.ndarray] = {}
+    lli: dict[str, np.ndarray] = {}
+    ssi: dict[str, np.ndarray] = {}
+    dropped = []
+    for sys_letter, types in data.header.obs_types.items():
+        cols = letters == sys_letter
+        if not cols.any():
+            continue  # RINEX 2 mixed headers list one set of types for every system
+        kept = []
+        for t in types:
+            new = rinex3_type(sys_letter, t)
+            if new is None:
+                dropped.append(f"{sys_letter} {t}")
+                continue
+            kept.append(new)
+            if new not in obs:
+                obs[new] = np.full((n_e, n_s), np.nan)
+                lli[new] = np.zeros((n_e, n_s), dtype=np.int8)
+                ssi[new] = np.zeros((n_e, n_s), dtype=np.int8)
+            obs[new][:, cols] = data.obs[t][:, cols]
+            lli[new][:, cols] = data.lli[t][:, cols]
+            ssi[new][:, cols] = data.ssi[t][:, cols]
+        if kept:
+            new_types[sys_letter] = kept
+    comments = list(data.header.comments)
+    comments.append(f"converted from RINEX {data.header.version:.2f} observation types")
+    if dropped:
+        comments.append("dropped (no RINEX 3 type): " + ", ".join(dropped))
+    header = dataclasses.replace(data.header, version=WRITE_VERSION, obs_types=new_types, comments=comments)
+    return ObsData(header, data.times, data.flags, data.clock_offset_s, data.sats, obs, lli, ssi, data.events)
