@@ -59,6 +59,7 @@ class Limits:
     source_idle_timeout_s: float = L.SOURCE_IDLE_TIMEOUT_S
     max_source_chunk_bytes: int = L.MAX_SOURCE_CHUNK_BYTES
     max_client_backlog_bytes: int = L.MAX_CLIENT_BACKLOG_BYTES
+    client_send_buffer_bytes: int = L.CLIENT_SEND_BUFFER_BYTES
     max_client_upload_bytes_per_s: int = L.MAX_CLIENT_UPLOAD_BYTES_PER_S
     max_clients: int = L.MAX_CLIENTS
     max_clients_per_mount: int = L.MAX_CLIENTS_PER_MOUNT

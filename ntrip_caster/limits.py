@@ -34,6 +34,11 @@ MAX_CHUNK_SIZE_LINE_BYTES = 1024
 # others. Millipede's choice is 16 KiB (ntrip.md); at 1 KB/s that is 16 s of corrections, already
 # useless to a train. Configurable.
 MAX_CLIENT_BACKLOG_BYTES = 16 * 1024
+# Kernel send buffer per client socket (SO_SNDBUF; Linux doubles it). Without it a stalled client
+# can hold up to tcp_wmem max (4 MiB) of kernel memory before the backlog bound even sees it:
+# 10,000 trains x 4 MiB is 40 GiB. 64 KiB still sustains 320 KB/s over a 200 ms cellular round
+# trip, far above an RTCM stream's 1-10 KB/s. 0 leaves the kernel's autotuning. Configurable.
+CLIENT_SEND_BUFFER_BYTES = 64 * 1024
 # Longest line a client may send after its request (GGA updates). NMEA 0183 caps a sentence at 82
 # characters; receivers with extra precision reach ~100. 256 bounds the line buffer.
 MAX_NMEA_LINE_BYTES = 256

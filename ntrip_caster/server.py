@@ -222,7 +222,7 @@ class CasterProtocol(asyncio.Protocol):
         if sock is not None:
             try:
                 sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            except OSError:
+            except (OSError, AttributeError):  # uvloop's pseudo-socket; uvloop sets NODELAY itself
                 pass
         self.caster._conns.add(self)
         self.head_timer = self.caster.loop.call_later(
@@ -499,6 +499,13 @@ class Caster:
             return
         s = ClientSession(self, proto, mount, req.version, user)
         proto.client = s
+        if lim.client_send_buffer_bytes:
+            sock = proto.transport.get_extra_info("socket")
+            if sock is not None:
+                try:
+                    sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, lim.client_send_buffer_bytes)
+                except (OSError, AttributeError):
+                    pass
         self.clients[s.id] = s
         self.per_ip[s.ip] += 1
         mount.clients_total += 1
