@@ -13,7 +13,8 @@ The project cannot ship a real broadcast file, so it builds its own from public 
 
 Every satellite follows one Keplerian orbit (with the J2 nodal regression of its altitude and
 inclination for MEO) and one clock line; each broadcast set at toe is that same orbit and clock
-re-expressed at its toe, so consecutive sets agree to the last bit of the model (no switch jumps).
+re-expressed at its toe and rounded to the broadcast resolution, so consecutive sets agree to
+that resolution (centimetres, a fraction of a nanosecond).
 Updates: GPS every 2 h, Galileo every 10 min, BeiDou every 1 h, as the systems do.
 """
 
@@ -28,6 +29,7 @@ from augnet.gnss import time as gtime
 from augnet.gnss.constants import (GM_BDS_M3_S2, GM_GAL_M3_S2, GM_GPS_M3_S2, OMEGA_E_BDS_RAD_S,
                                    OMEGA_E_GAL_RAD_S, OMEGA_E_GPS_RAD_S, WGS84_A_M)
 from augnet.gnss.ephemeris import Ephemeris
+from stations.ephemeris_messages import quantise
 
 J2 = 1.08262668e-3  # Earth's second zonal harmonic (EGM96), for nominal nodal regression
 
@@ -178,13 +180,16 @@ def broadcast_set(orbit: NominalOrbit, toe_gpst: float, iode: int) -> Ephemeris:
     common = dict(system=system, prn=orbit.prn, week=week, toe=toe, toc=toe, af0=af0, af1=orbit.af1,
                   af2=0.0, iode=iode, crs=0.0, delta_n=0.0, m0=m0, cuc=0.0, e=orbit.e, cus=0.0,
                   sqrt_a=math.sqrt(orbit.a_m), cic=0.0, omega0=omega0, cis=0.0, i0=orbit.inc_rad,
-                  crc=0.0, omega=orbit.arg_perigee_rad, omega_dot=orbit.raan_rate_rad_s, idot=0.0,
+                  crc=0.0, omega=math.remainder(orbit.arg_perigee_rad, 2 * math.pi),
+                  omega_dot=orbit.raan_rate_rad_s, idot=0.0,
                   health=0, accuracy_m=URA_M, iodc=iode, transmission_time=toe)
     if system == "G":
         common.update(codes_on_l2=1, fit_interval_h=4.0)
     elif system == "E":
         common.update(data_sources=GAL_INAV_DATA_SOURCES)
-    return Ephemeris(**common)
+    # On the broadcast resolution, like a real upload: what nav.rnx holds is exactly what a receiver
+    # decodes from RTCM 1019/1042/1046.  Consecutive sets then differ by the quantisation (cm, 0.1 ns).
+    return quantise(Ephemeris(**common))
 
 
 def issue_of_data(system: str, toe_gpst: float) -> int:

@@ -1,0 +1,113 @@
+"""Broadcast ephemerides <-> RTCM 1019 (GPS), 1042 (BeiDou), 1046 (Galileo I/NAV) field values.
+
+One table per message maps each `Ephemeris` attribute to its data field and unit conversion
+(RINEX keeps radians, RTCM and the ICDs semicircles).  The same table quantises a simulated
+ephemeris to the broadcast resolution, so what the simulator writes to nav.rnx is exactly what a
+receiver decodes from the RTCM stream.
+
+(The RTCM package does not yet offer Ephemeris <-> message conversion; when it does, this module
+should defer to it.)
+"""
+
+from __future__ import annotations
+
+import math
+
+from augnet.gnss.ephemeris import Ephemeris
+from augnet.gnss.rtcm.codec import RtcmMessage
+from augnet.gnss.rtcm.fields import FIELDS, from_value, to_value
+
+SEMICIRCLE_RAD = 3.1415926535898  # IS-GPS-200 / BDS / Galileo ICDs' value of pi for semicircles
+
+# (attribute, data field, factor: field value = attribute * factor)
+_ORBIT_GPS = (
+    ("idot", "DF079", 1 / SEMICIRCLE_RAD), ("toc", "DF081", 1.0), ("af2", "DF082", 1.0),
+    ("af1", "DF083", 1.0), ("af0", "DF084", 1.0), ("crs", "DF086", 1.0),
+    ("delta_n", "DF087", 1 / SEMICIRCLE_RAD), ("m0", "DF088", 1 / SEMICIRCLE_RAD), ("cuc", "DF089", 1.0),
+    ("e", "DF090", 1.0), ("cus", "DF091", 1.0), ("sqrt_a", "DF092", 1.0), ("toe", "DF093", 1.0),
+    ("cic", "DF094", 1.0), ("omega0", "DF095", 1 / SEMICIRCLE_RAD), ("cis", "DF096", 1.0),
+    ("i0", "DF097", 1 / SEMICIRCLE_RAD), ("crc", "DF098", 1.0), ("omega", "DF099", 1 / SEMICIRCLE_RAD),
+    ("omega_dot", "DF100", 1 / SEMICIRCLE_RAD), ("tgd", "DF101", 1.0),
+)
+_ORBIT_BDS = (
+    ("idot", "DF491", 1 / SEMICIRCLE_RAD), ("toc", "DF493", 1.0), ("af2", "DF494", 1.0),
+    ("af1", "DF495", 1.0), ("af0", "DF496", 1.0), ("crs", "DF498", 1.0),
+    ("delta_n", "DF499", 1 / SEMICIRCLE_RAD), ("m0", "DF500", 1 / SEMICIRCLE_RAD), ("cuc", "DF501", 1.0),
+    ("e", "DF502", 1.0), ("cus", "DF503", 1.0), ("sqrt_a", "DF504", 1.0), ("toe", "DF505", 1.0),
+    ("cic", "DF506", 1.0), ("omega0", "DF507", 1 / SEMICIRCLE_RAD), ("cis", "DF508", 1.0),
+    ("i0", "DF509", 1 / SEMICIRCLE_RAD), ("crc", "DF510", 1.0), ("omega", "DF511", 1 / SEMICIRCLE_RAD),
+    ("omega_dot", "DF512", 1 / SEMICIRCLE_RAD), ("tgd1", "DF513", 1e9), ("tgd2", "DF514", 1e9),
+)
+_ORBIT_GAL = (
+    ("idot", "DF292", 1 / SEMICIRCLE_RAD), ("toc", "DF293", 1.0), ("af2", "DF294", 1.0),
+    ("af1", "DF295", 1.0), ("af0", "DF296", 1.0), ("crs", "DF297", 1.0),
+    ("delta_n", "DF298", 1 / SEMICIRCLE_RAD), ("m0", "DF299", 1 / SEMICIRCLE_RAD), ("cuc", "DF300", 1.0),
+    ("e", "DF301", 1.0), ("cus", "DF302", 1.0), ("sqrt_a", "DF303", 1.0), ("toe", "DF304", 1.0),
+    ("cic", "DF305", 1.0), ("omega0", "DF306", 1 / SEMICIRCLE_RAD), ("cis", "DF307", 1.0),
+    ("i0", "DF308", 1 / SEMICIRCLE_RAD), ("crc", "DF309", 1.0), ("omega", "DF310", 1 / SEMICIRCLE_RAD),
+    ("omega_dot", "DF311", 1 / SEMICIRCLE_RAD), ("bgd_e5a_e1", "DF312", 1.0), ("bgd_e5b_e1", "DF313", 1.0),
+)
+ORBIT_FIELDS = {"G": _ORBIT_GPS, "C": _ORBIT_BDS, "E": _ORBIT_GAL}
+MESSAGE_TYPE = {"G": 1019, "C": 1042, "E": 1046}
+
+
+def _ura_index(accuracy_m: float) -> int:
+    """GPS URA / BDS URAI index (IS-GPS-200 20.3.3.3.1.3): smallest index whose bound covers it."""
+    bounds = (2.4, 3.4, 4.85, 6.85, 9.65, 13.65, 24.0, 48.0, 96.0, 192.0, 384.0, 768.0, 1536.0, 3072.0, 6144.0)
+    for i, b in enumerate(bounds):
+        if accuracy_m <= b:
+            return i
+    return 15
+
+
+def _sisa_index(accuracy_m: float) -> int:
+    """Galileo SISA index (OS SIS ICD 5.1.11)."""
+    x = accuracy_m
+    if x < 0.5:
+        return int(round(x / 0.01))
+    if x < 1.0:
+        return 50 + int(round((x - 0.5) / 0.02))
+    if x < 2.0:
+        return 75 + int(round((x - 1.0) / 0.04))
+    if x < 6.0:
+        return 100 + int(round((x - 2.0) / 0.16))
+    return 255
+
+
+def _quantised(df: str, value: float) -> float:
+    f = FIELDS[df]
+    return float(to_value(f, from_value(f, value)))
+
+
+def quantise(eph: Ephemeris) -> Ephemeris:
+    """The ephemeris with every orbit and clock parameter on its broadcast resolution."""
+    changes = {}
+    for attr, df, factor in ORBIT_FIELDS[eph.system]:
+        changes[attr] = _quantised(df, getattr(eph, attr) * factor) / factor
+    return eph.replace(**changes)
+
+
+def ephemeris_message(eph: Ephemeris) -> RtcmMessage:
+    """The RTCM 1019 / 1042 / 1046 message of a broadcast ephemeris."""
+    s = eph.system
+    fields: dict[str, object] = {}
+    for attr, df, factor in ORBIT_FIELDS[s]:
+        fields[df] = getattr(eph, attr) * factor
+    if s == "G":
+        fields.update(DF009=eph.prn, DF076=eph.week % 1024, DF077=_ura_index(eph.accuracy_m),
+                      DF078=eph.codes_on_l2, DF071=eph.iode, DF085=eph.iodc, DF102=eph.health,
+                      DF103=eph.l2p_data_flag, DF137=0 if eph.fit_interval_h <= 4.0 else 1)
+    elif s == "C":
+        fields.update(DF488=eph.prn, DF489=eph.week, DF490=_ura_index(eph.accuracy_m), DF492=eph.iode,
+                      DF497=eph.iodc % 32, DF515=eph.health & 1)
+    elif s == "E":
+        fields.update(DF252=eph.prn, DF289=eph.week, DF290=eph.iode, DF286=_sisa_index(eph.accuracy_m),
+                      DF316=0, DF317=0, DF287=0, DF288=0)
+    else:
+        raise ValueError(f"no RTCM ephemeris message for system {s!r}")
+    return RtcmMessage(MESSAGE_TYPE[s], fields)
+
+
+def wrap_angle(rad: float) -> float:
+    """An angle in [-pi, pi): semicircle fields are signed and hold [-1, 1)."""
+    return math.remainder(rad, 2 * math.pi)
