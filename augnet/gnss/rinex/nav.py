@@ -53,6 +53,12 @@ class NavFile:
     ephemerides: list[Ephemeris]
     skipped: dict[str, int] = field(default_factory=dict)  # system letter -> records not kept
 
+    def __iter__(self):
+        return iter(self.ephemerides)
+
+    def __len__(self) -> int:
+        return len(self.ephemerides)
+
 
 # --------------------------------------------------------------------------------------------
 # reading
