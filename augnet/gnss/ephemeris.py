@@ -12,6 +12,12 @@ Times in it are what the message carries: `week`, `toe` and `toc` in the satelli
 time scale and week numbering (GPS week for G/J, Galileo week for E, BDS week for C; full week
 numbers, no roll-over).  Everything computed from it uses augnet's GPST seconds (see `time.py`).
 
+Mapping to RTCM 3 (RTCM 10403.3 3.5.x): angles there are semicircles (multiply by pi), weeks are
+truncated (1019: GPS week mod 1024; 1045/1046: GST week mod 4096; 1042: BDT week mod 8192) and
+must be resolved to the full week near the current time; BDS toe/toc are BDT seconds of week as
+here.  1046 is I/NAV (data_sources 517), 1045 F/NAV (258): the clock pair and the BGD that goes
+with it follow from that.
+
 Vectorised: `EphemerisTable` is a struct of arrays over many ephemerides; `satellite_state`
 evaluates all of them at once (any broadcastable time array), the Kepler equation included.
 """
@@ -374,7 +380,9 @@ class NavigationData:
     Selection (per satellite and time): same satellite; healthy (unless `allow_unhealthy`);
     |t - toe| within the system's limit (GPS: half the fit interval, at least 2 h; Galileo 4 h and
     only after toe, i.e. age of data > 0; BDS 6 h); Galileo of the preferred data source (I/NAV by
-    default, as the E1/E5b dual-frequency clock; `galileo_source='fnav'` or 'any');
+    default, as the E1/E5b dual-frequency clock; `galileo_source='fnav'` or 'any'; a set whose
+    data_sources is 0 (unknown) is accepted either way); RTCM 1046 is I/NAV (set data_sources
+    GAL_SOURCE_INAV_E1B | GAL_SOURCE_INAV_E5B | GAL_CLOCK_E5B_E1 = 517), 1045 F/NAV (258);
     then the set with toe nearest t, ties going to the later toe (the newer upload).
     """
 
@@ -392,7 +400,8 @@ class NavigationData:
             usable &= tb.health == 0
         if len(tb) and galileo_source != "any":
             wanted = _is_inav(tb.data_sources) if galileo_source == "inav" else _is_fnav(tb.data_sources)
-            usable &= (tb.system != "E") | wanted
+            # data_sources 0 = not recorded (e.g. a converter that left it out): accept the set.
+            usable &= (tb.system != "E") | wanted | (tb.data_sources == 0)
         max_dist = np.array([MAX_TOE_DISTANCE_S[s] for s in tb.system], dtype=float)
         if len(tb):
             gps_fit = (tb.system == "G") & (tb.fit_interval_h > 4.0)

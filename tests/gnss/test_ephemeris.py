@@ -133,6 +133,9 @@ def test_selection_rules(nav2023, nav2024):
     i_src = {inav.table.records[i].data_sources for i in i_idx if i >= 0}
     f_src = {fnav.table.records[i].data_sources for i in f_idx if i >= 0}
     assert i_src == {517} and f_src == {258}
+    # A Galileo set whose data sources were not recorded (0) is used under either preference.
+    unknown = [e.replace(data_sources=0) for e in nav2024 if e.system == "E" and e.data_sources == 258]
+    assert NavigationData(unknown, galileo_source="inav").select([unknown[0].sat], t1)[0] >= 0
     # Vectorised over epochs: T x N.
     times = t0 + np.arange(0.0, 3600.0, 600.0)
     assert nav.select(["G01", "E07", "C06"], times).shape == (6, 3)
