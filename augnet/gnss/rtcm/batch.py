@@ -24,7 +24,7 @@ import numpy as np
 
 from augnet.gnss.rtcm.errors import EncodeError
 from augnet.gnss.rtcm.fields import FIELDS
-from augnet.gnss.rtcm.framing import FRAME_OVERHEAD_BYTES, PREAMBLE, crc24q_columns
+from augnet.gnss.rtcm.framing import FRAME_OVERHEAD_BYTES, PREAMBLE, crc24q_rows
 from augnet.gnss.rtcm.layouts import MSM_MAX_CELLS, cell_fields, msm_type, sat_fields
 from augnet.gnss.rtcm.observables import cell_presence, observables_to_fields, wavelengths
 
@@ -92,9 +92,10 @@ def _packing(widths: tuple[int, ...]) -> _Packing:
 
 
 def _pack_columns(values: np.ndarray, widths: tuple[int, ...]) -> np.ndarray:
-    """(nfields, n) signed integers -> (nbytes, n) big-endian bit-packed payloads, one per column.
+    """(nfields, n) signed integers -> (n, nbytes) big-endian bit-packed payloads, one row per receiver.
 
-    Receivers run along the contiguous axis, so every step below is a whole-row numpy operation.
+    Receivers run along the contiguous axis while packing, so every step is a whole-row numpy
+    operation; the (few) 64-bit words are then transposed and byte-swapped in one copy.
     """
     p = _packing(widths)
     v = np.bitwise_and(values, p.masks[:, None], out=values).view(np.uint64)  # two's complement -> bits
@@ -102,10 +103,8 @@ def _pack_columns(values: np.ndarray, widths: tuple[int, ...]) -> np.ndarray:
     parts <<= p.part_lshift[:, None]
     parts >>= p.part_rshift[:, None]
     words = np.add.reduceat(parts, p.word_starts, axis=0)  # (nwords, n) native uint64
-    nwords, n = words.shape
-    # bytes of each word most significant first (big-endian), then byte position major
-    be = words.view(np.uint8).reshape(nwords, n, 8)[:, :, ::-1].transpose(0, 2, 1).reshape(nwords * 8, n)
-    return be[: p.nbytes]
+    rows = words.T.astype(">u8", order="C")  # (n, nwords), most significant byte first
+    return rows.view(np.uint8)[:, : p.nbytes]
 
 
 def encode_msm_batch(
@@ -231,17 +230,16 @@ def encode_msm_batch(
             widths.extend([FIELDS[df].width] * len(cell_sel))
             row += len(cell_sel)
         payload = _pack_columns(values, tuple(widths))
-        nbytes = payload.shape[0]
-        frames = np.empty((nbytes + FRAME_OVERHEAD_BYTES, n), dtype=np.uint8)  # byte position major
-        frames[0] = PREAMBLE
-        frames[1] = nbytes >> 8
-        frames[2] = nbytes & 0xFF
-        frames[3 : 3 + nbytes] = payload
-        crc = crc24q_columns(frames[: 3 + nbytes])
-        frames[-3] = crc >> 16
-        frames[-2] = (crc >> 8) & 0xFF
-        frames[-1] = crc & 0xFF
-        frames = frames.T  # (n, frame length)
+        nbytes = payload.shape[1]
+        frames = np.empty((n, nbytes + FRAME_OVERHEAD_BYTES), dtype=np.uint8)
+        frames[:, 0] = PREAMBLE
+        frames[:, 1] = nbytes >> 8
+        frames[:, 2] = nbytes & 0xFF
+        frames[:, 3 : 3 + nbytes] = payload
+        crc = crc24q_rows(frames[:, : 3 + nbytes])
+        frames[:, -3] = crc >> 16
+        frames[:, -2] = (crc >> 8) & 0xFF
+        frames[:, -1] = crc & 0xFF
         frame_len[rx] = frames.shape[1]
         packed.append((rx, frames))
 

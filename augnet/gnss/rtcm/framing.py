@@ -54,7 +54,7 @@ _CRC_NUMPY_MIN_BYTES = 128
 def crc24q(data: bytes) -> int:
     """CRC-24Q of ``data`` (initial value 0, no final XOR)."""
     if len(data) >= _CRC_NUMPY_MIN_BYTES and len(data) <= MAX_FRAME_BYTES:
-        return int(crc24q_columns(np.frombuffer(bytes(data), dtype=np.uint8)[:, None])[0])
+        return int(crc24q_rows(np.frombuffer(bytes(data), dtype=np.uint8)[None, :])[0])
     return crc24q_bytewise(data)
 
 
@@ -78,19 +78,20 @@ def _crc_position_table() -> np.ndarray:
     return out
 
 
-def crc24q_columns(cols: np.ndarray) -> np.ndarray:
-    """CRC-24Q of each column of an (L, n) uint8 array (byte position major), vectorised over columns."""
-    length, n = cols.shape
+def crc24q_rows(rows: np.ndarray) -> np.ndarray:
+    """CRC-24Q of each row of an (n, L) uint8 array, vectorised over rows (receivers).
+
+    CRC-24Q with initial value 0 and no final XOR is linear over GF(2): the CRC of a row is the
+    XOR over its bytes of T[L - 1 - position, byte] (see ``_crc_position_table``).
+    """
+    rows = np.asarray(rows, dtype=np.uint8)
+    n, length = rows.shape
     if length == 0:
         return np.zeros(n, dtype=np.uint32)
-    t = _crc_position_table()
-    contrib = t[(length - 1 - np.arange(length))[:, None], cols]
-    return np.bitwise_xor.reduce(contrib, axis=0)
-
-
-def crc24q_rows(rows: np.ndarray) -> np.ndarray:
-    """CRC-24Q of each row of an (n, L) uint8 array."""
-    return crc24q_columns(np.ascontiguousarray(np.asarray(rows, dtype=np.uint8).T))
+    flat = _crc_position_table().ravel()
+    idx = rows.astype(np.intp)
+    idx += (length - 1 - np.arange(length, dtype=np.intp)) * 256  # the table row for each position
+    return np.bitwise_xor.reduce(flat[idx], axis=1)
 
 
 class FramingError(ValueError):
