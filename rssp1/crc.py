@@ -8,9 +8,9 @@ Parameters (rssp1.md, checked against 970 captured frames and the check values b
   bit-reversed, then the reflected algorithm (with the bit-reversed polynomial) runs, init 0, no final
   XOR. Check values of b"123456789": 0x65A297AC and 0xC12BAA78.
 
-Speed: pure Python, so the loops eat 16 bits per table lookup instead of 8 (a 65,536-entry table per
-code, built once at import in a few tens of milliseconds). That halves the interpreted iterations,
-which is where the time goes; see augnet/bench/rssp1.py.
+Speed: pure Python, so the loops eat 32 bits per iteration (two lookups in 65,536-entry tables, two
+tables per code, built once at import in a fraction of a second; about 2.5 MB per table). Interpreted
+iterations are where the time goes: a quarter of a byte-at-a-time loop's. See augnet/bench/rssp1.py.
 """
 
 from __future__ import annotations
@@ -64,33 +64,55 @@ def _word_table(byte_table: list[int]) -> list[int]:
     return out
 
 
+def _low_half_32_table(word_table: list[int]) -> list[int]:
+    """table[x] = the register after 32 shifts of a reflected CRC holding x (< 2**16).
+
+    Consuming a 32-bit little-endian word w: with x = register ^ w, the new register is
+    table[x & 0xFFFF] ^ word_table[x >> 16] (the high half only sees the second 16 shifts, which is
+    word_table by linearity). Two lookups per four bytes: half the interpreted iterations again.
+    """
+    out = [0] * 65536
+    for x in range(65536):
+        r = word_table[x]
+        out[x] = word_table[r & 0xFFFF] ^ (r >> 16)
+    return out
+
+
 _CRC16_BYTE = _reflected_step_table(CRC16_POLY_REFLECTED, 8)
 _CRC16_WORD = _word_table(_CRC16_BYTE)
+_CRC16_LOW32 = _low_half_32_table(_CRC16_WORD)
 
 _CRC32_CH1_BYTE = _reflected_step_table(reverse_bits(CRC32_CH1_POLY_NORMAL, 32), 8)
 _CRC32_CH2_BYTE = _reflected_step_table(reverse_bits(CRC32_CH2_POLY_NORMAL, 32), 8)
 _CRC32_CH1_WORD = _word_table(_CRC32_CH1_BYTE)
 _CRC32_CH2_WORD = _word_table(_CRC32_CH2_BYTE)
+_CRC32_CH1_LOW32 = _low_half_32_table(_CRC32_CH1_WORD)
+_CRC32_CH2_LOW32 = _low_half_32_table(_CRC32_CH2_WORD)
 
 _WORD_FORMATS: dict[int, struct.Struct] = {}
 
 
-def _words(data: bytes | memoryview, n_words: int) -> tuple[int, ...]:
+def _words32(data: bytes | memoryview, n_words: int) -> tuple[int, ...]:
     fmt = _WORD_FORMATS.get(n_words)
     if fmt is None:
-        fmt = _WORD_FORMATS.setdefault(n_words, struct.Struct(f"<{n_words}H"))
+        fmt = _WORD_FORMATS.setdefault(n_words, struct.Struct(f"<{n_words}I"))
     return fmt.unpack_from(data, 0)
 
 
 def crc16(data: bytes | bytearray | memoryview) -> int:
     """RSSP-I CRC16 (reflected 0x8810, init 0, no final XOR)."""
-    table = _CRC16_WORD
+    low, word = _CRC16_LOW32, _CRC16_WORD
     n = len(data)
     c = 0
-    for w in _words(data, n >> 1):
-        c = table[c ^ w]
+    for w in _words32(data, n >> 2):
+        x = c ^ w
+        c = low[x & 0xFFFF] ^ word[x >> 16]
+    i = n & ~3
+    if n & 2:
+        c = word[c ^ data[i] ^ (data[i + 1] << 8)]
+        i += 2
     if n & 1:
-        c = _CRC16_BYTE[(c ^ data[n - 1]) & 0xFF] ^ (c >> 8)
+        c = _CRC16_BYTE[(c ^ data[i]) & 0xFF] ^ (c >> 8)
     return c
 
 
@@ -106,16 +128,24 @@ def crc32_ch2(data: bytes | bytearray | memoryview) -> int:
 
 def crc32_pair(data: bytes | bytearray | memoryview) -> tuple[int, int]:
     """Both channel CRC32s in one pass over the data (init 0, no final XOR)."""
-    t1, t2 = _CRC32_CH1_WORD, _CRC32_CH2_WORD
+    l1, w1, l2, w2 = _CRC32_CH1_LOW32, _CRC32_CH1_WORD, _CRC32_CH2_LOW32, _CRC32_CH2_WORD
     # The codes take every byte bit-reversed; bytes.translate does that in C.
     data = bytes(data).translate(_BYTE_REVERSED)
     n = len(data)
     c1 = c2 = 0
-    for w in _words(data, n >> 1):
-        c1 = t1[(c1 ^ w) & 0xFFFF] ^ (c1 >> 16)
-        c2 = t2[(c2 ^ w) & 0xFFFF] ^ (c2 >> 16)
+    for w in _words32(data, n >> 2):
+        x = c1 ^ w
+        c1 = l1[x & 0xFFFF] ^ w1[x >> 16]
+        x = c2 ^ w
+        c2 = l2[x & 0xFFFF] ^ w2[x >> 16]
+    i = n & ~3
+    if n & 2:
+        w = data[i] | (data[i + 1] << 8)
+        c1 = w1[(c1 ^ w) & 0xFFFF] ^ (c1 >> 16)
+        c2 = w2[(c2 ^ w) & 0xFFFF] ^ (c2 >> 16)
+        i += 2
     if n & 1:
-        b = data[n - 1]
+        b = data[i]
         c1 = _CRC32_CH1_BYTE[(c1 ^ b) & 0xFF] ^ (c1 >> 8)
         c2 = _CRC32_CH2_BYTE[(c2 ^ b) & 0xFF] ^ (c2 >> 8)
     return c1, c2

@@ -65,25 +65,25 @@ class LinkState(enum.Enum):
     UP = "up"
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen: a frozen __init__ costs a microsecond per frame
 class DataReceived:
     data: bytes
     tc: int
     machine: str  # "A" or "B"
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen: a frozen __init__ costs a microsecond per frame
 class LinkUp:
     cycle: int
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen: a frozen __init__ costs a microsecond per frame
 class LinkDown:
     reason: str
     cycle: int
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen: a frozen __init__ costs a microsecond per frame
 class FrameDropped:
     reason: str
 

@@ -56,7 +56,7 @@ class FrameError(ValueError):
         self.reason = reason
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen: a frozen __init__ costs a microsecond per frame
 class Rsd:
     category: int
     msg_type: int  # TYPE_RSD_A or TYPE_RSD_B
@@ -71,7 +71,7 @@ class Rsd:
         return "A" if self.msg_type == TYPE_RSD_A else "B"
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen: a frozen __init__ costs a microsecond per frame
 class Sse:
     category: int
     source: int
@@ -80,7 +80,7 @@ class Sse:
     seqenq: tuple[int, int]
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen: a frozen __init__ costs a microsecond per frame
 class Ssr:
     category: int
     source: int
