@@ -166,9 +166,35 @@ class LoadClient(asyncio.Protocol):
                 return
             data = rest
         if self.spec.version == 2:
-            data = self._dechunk(data)
+            if not self.raw and self.chunk_left == 0:
+                # Fast path: the caster writes each chunk whole, so a read is usually one chunk.
+                end = data.find(b"\r\n", 0, 12)
+                if end > 0:
+                    size = int(data[:end], 16)
+                    if size and len(data) == end + size + 4 and data.endswith(b"\r\n"):
+                        data = data[end + 2:end + 2 + size]
+                    else:
+                        data = self._dechunk(data)
+                else:
+                    data = self._dechunk(data)
+            else:
+                data = self._dechunk(data)
+        if not self.buf and len(data) >= 6 and data[0] == 0xD3 and \
+                len(data) == (((data[1] & 3) << 8) | data[2]) + 6:
+            self._frame(data, now)  # fast path: exactly one frame
+            return
         self.buf += data
         self._frames(now)
+
+    def _frame(self, frame: bytes, now: int) -> None:
+        if len(frame) < 6 + _HEAD.size:
+            self.bad += 1
+            return
+        mtype, seq, sent = _HEAD.unpack_from(frame, 3)
+        if mtype >> 4 != LOADTEST_MESSAGE_TYPE or not self.check.check(seq, frame):
+            self.bad += 1
+            return
+        self.latency_ns[seq] = now - sent
 
     def _dechunk(self, data: bytes) -> bytes:
         raw = self.raw
@@ -213,16 +239,8 @@ class LoadClient(asyncio.Protocol):
             total = (((buf[pos + 1] & 3) << 8) | buf[pos + 2]) + 6
             if n - pos < total:
                 break
-            frame = bytes(buf[pos:pos + total])
+            self._frame(bytes(buf[pos:pos + total]), now)
             pos += total
-            if total < 6 + _HEAD.size:
-                self.bad += 1
-                continue
-            mtype, seq, sent = _HEAD.unpack_from(frame, 3)
-            if mtype >> 4 != LOADTEST_MESSAGE_TYPE or not self.check.check(seq, frame):
-                self.bad += 1
-                continue
-            self.latency_ns[seq] = now - sent
         del buf[:pos]
 
 
@@ -322,7 +340,8 @@ def spawn_caster(gga: bool, use_uvloop: bool, backlog: int | None = None) -> tup
     """Start `ntrip-caster serve` on a free loopback port; returns (process, port, workdir)."""
     work = Path(tempfile.mkdtemp(prefix="augnet-loadtest-"))
     cfg = work / "caster.toml"
-    text = ("[caster]\nhost = \"127.0.0.1\"\nport = 0\nallow_unknown_sources = false\n\n"
+    text = ("[caster]\nhost = \"127.0.0.1\"\nport = 0\nallow_unknown_sources = false\n"
+            f"stats_path = \"{work / 'stats.json'}\"\nstats_interval_s = 1.0\n\n"
             "[[mountpoints]]\nname = \"LOAD\"\nkind = \"source\"\nwrite = [\"*\"]\n"
             f"latitude = {LOAD_BASE_LAT_DEG}\nlongitude = {LOAD_BASE_LON_DEG}\n\n"
             "[[mountpoints]]\nname = \"NEAR\"\nkind = \"nearest\"\n")
@@ -385,6 +404,7 @@ def run_load(s: LoadSettings) -> dict[str, Any]:
     import psutil
 
     spawned = None
+    _work = Path(".")
     if s.target:
         host, _, port_text = s.target.rpartition(":")
         port = int(port_text)
@@ -485,6 +505,15 @@ def run_load(s: LoadSettings) -> dict[str, Any]:
                 spawned.wait(timeout=10)
             except subprocess.TimeoutExpired:
                 spawned.kill()
+    fanout = None
+    if spawned is not None:  # our caster's own view: time to hand one epoch to every client
+        try:
+            stats = json.loads((_work / "stats.json").read_text())
+            m = stats["mounts"]["LOAD"]
+            fanout = {"max_ms": m["fanout_max_ms"], "drops": m["drops"],
+                      "bytes_out": m["bytes_out"]}
+        except (OSError, ValueError, KeyError):
+            pass
     return {
         "label": s.label or ("augnet" if spawned is not None else s.target),
         "requested": s.clients, "connected": connected, "complete": complete,
@@ -492,7 +521,7 @@ def run_load(s: LoadSettings) -> dict[str, Any]:
         "latency_ms": _percentiles(lat), "samples": len(lat),
         "caster_cpu_percent": round(100.0 * cpu_s / window_s, 1) if caster else None,
         "caster_rss_mb": round(rss_peak / 2**20, 1) if caster else None,
-        "connect_s": round(connect_s, 2), "statuses": statuses,
+        "connect_s": round(connect_s, 2), "statuses": statuses, "caster_fanout": fanout,
         "settings": {k: v for k, v in asdict(s).items() if k not in ("password", "source_password",
                                                                      "extra")},
         "cpus": os.cpu_count(),

@@ -120,7 +120,7 @@ class ClientSession:
 class Mountpoint:
     __slots__ = ("name", "kind", "cfg", "v1", "v2", "source", "aligner", "factory", "bytes_in",
                  "frames_in", "bytes_out", "clients_total", "drops", "source_sessions",
-                 "created_at", "caster", "record", "auto")
+                 "created_at", "caster", "record", "auto", "fanout_last_ms", "fanout_max_ms")
 
     def __init__(self, caster: "Caster", cfg: MountConfig, factory: StreamFactory | None = None) -> None:
         self.caster = caster
@@ -141,6 +141,8 @@ class Mountpoint:
         self.source_sessions = 0
         self.created_at = time.time()
         self.auto = False  # created by a source for a name not in the config
+        self.fanout_last_ms = 0.0  # time one publish took to hand a piece to every client
+        self.fanout_max_ms = 0.0
 
     @property
     def live(self) -> bool:
@@ -155,6 +157,7 @@ class Mountpoint:
 
     def publish(self, data: bytes) -> None:
         """Write one piece of the stream to every subscriber: encoded once per version."""
+        t0 = time.perf_counter()
         limit = self.caster.limits.max_client_backlog_bytes
         dropped: list[ClientSession] = []
         out = 0
@@ -177,6 +180,10 @@ class Mountpoint:
         self.bytes_out += out
         for s in dropped:
             self.caster.drop_client(s, "backlog")
+        ms = (time.perf_counter() - t0) * 1e3
+        self.fanout_last_ms = ms
+        if ms > self.fanout_max_ms:
+            self.fanout_max_ms = ms
 
     def stats(self) -> dict[str, Any]:
         src = self.source
@@ -190,6 +197,7 @@ class Mountpoint:
                 "user": src.user, "agent": src.agent, "version": src.version,
                 "connected_since": src.connected_since, "bytes_in": src.bytes_in},
             "source_sessions": self.source_sessions,
+            "fanout_last_ms": round(self.fanout_last_ms, 3), "fanout_max_ms": round(self.fanout_max_ms, 3),
         }
 
 
