@@ -40,6 +40,29 @@ def inspect(
 
 
 @app.command()
+def demo(
+    transport: str = typer.Option("udp", help="udp or tcp"),
+    sealed: bool = typer.Option(False, help="wrap RSSP-I in the AES-GCM open-bearer envelope"),
+    fault: str = typer.Option("section", help="section, corrections or link"),
+    cycle_ms: int = typer.Option(250, help="main cycle, ms (field example: 250)"),
+) -> None:
+    """Stand-in centre -> RSSP-I over loopback -> RBC simulator: measure the time to alarm."""
+    import asyncio
+
+    from rssp1.config import LinkTiming
+    from rssp1.loopback import time_to_alarm
+
+    if transport not in ("udp", "tcp") or fault not in ("section", "corrections", "link"):
+        raise typer.BadParameter("transport udp|tcp, fault section|corrections|link")
+    timing = LinkTiming(cycle_s=cycle_ms / 1000)
+    r = asyncio.run(time_to_alarm(timing, transport=transport, sealed=sealed, fault=fault))
+    typer.echo(
+        f"{r.transport}{' sealed' if r.sealed else ''}: link up after {r.link_up_s:.3f} s; fault '{fault}' -> "
+        f"RBC alarm {r.alarm} after {r.time_to_alarm_s * 1000:.0f} ms ({r.centre_cycles} centre cycles)"
+    )
+
+
+@app.command()
 def version() -> None:
     """Print the protocol constants this build uses."""
     from rssp1.checkword import SYS_CHK_WD

@@ -109,3 +109,22 @@ class LinkConfig:
     local: DeviceConfig
     peer: DeviceConfig
     timing: LinkTiming = field(default_factory=LinkTiming)
+
+
+def link_config_from_mapping(m: Mapping[str, Any]) -> LinkConfig:
+    """A link from configuration (YAML/JSON already parsed), e.g.
+
+        {"local": {"address": "0x0101", "sid": ["0x1A2B3C4D", "0x5E6F7081"], "dataver": [1, 2]},
+         "peer":  {"address": "0x0029", "sid": ["0x311616DC", "0x07643EDE"], "dataver": [10, 11]},
+         "timing": {"cycle_s": 0.25, "delta_time": 3, "life_time": 4, "delay_time": 3}}
+    """
+    unknown = set(m) - {"local", "peer", "timing"}
+    if unknown:
+        raise ValueError(f"unknown link settings: {sorted(unknown)}")
+    timing = m.get("timing", {})
+    bad = set(timing) - {"cycle_s", "delta_time", "life_time", "delay_time"}
+    if bad:
+        raise ValueError(f"unknown timing settings: {sorted(bad)}")
+    return LinkConfig(
+        DeviceConfig.from_mapping(m["local"]), DeviceConfig.from_mapping(m["peer"]), LinkTiming(**timing)
+    )

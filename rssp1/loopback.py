@@ -10,6 +10,7 @@ its alarm. Used by tests/rssp1/test_loopback.py and `python -m rssp1 demo`.
 from __future__ import annotations
 
 import asyncio
+import random
 import time
 from dataclasses import dataclass
 
@@ -70,10 +71,11 @@ async def _wait_for(predicate, clock, limit_s: float = WAIT_LIMIT_S, poll_s: flo
 
 async def time_to_alarm(
     timing: LinkTiming, *, transport: str = "udp", sealed: bool = False, fault: str = "section",
-    host: str = "127.0.0.1",
+    host: str = "127.0.0.1", phase_s: float | None = None,
 ) -> AlarmTiming:
     """fault: "section" (a line section becomes DO_NOT_USE), "corrections" (the engine stops producing;
-    the time counts from the moment the age passes the limit) or "link" (the centre goes silent)."""
+    the time counts from the moment the age passes the limit) or "link" (the centre goes silent).
+    phase_s: when in the centre's cycle the fault comes (default: uniformly random in one cycle)."""
     clock = time.monotonic
     centre_ep, rbc_ep = Endpoint(DEMO_CENTRE, DEMO_RBC, timing), Endpoint(DEMO_RBC, DEMO_CENTRE, timing)
     if sealed:
@@ -97,7 +99,9 @@ async def time_to_alarm(
     tasks = [asyncio.create_task(rbc_link.run()), asyncio.create_task(centre_link.run())]
     try:
         up_at = await _wait_for(lambda: rbc.effective_status(FAULT_SECTION) is SectionStatus.OK, clock)
-        await asyncio.sleep(3 * timing.cycle_s)  # run steadily for a while before the fault
+        # run steadily for a while, then fault at a random point of the cycle
+        phase = random.uniform(0.0, timing.cycle_s) if phase_s is None else phase_s
+        await asyncio.sleep(3 * timing.cycle_s + phase)
         cycles_before = centre_link.stats["cycles"]
         if fault == "section":
             fault_at = clock()

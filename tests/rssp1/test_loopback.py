@@ -8,6 +8,9 @@ import random
 
 import pytest
 
+from typer.testing import CliRunner
+
+from rssp1.cli import app
 from rssp1.config import LinkTiming
 from rssp1.endpoint import DataReceived, Endpoint, LinkUp
 from rssp1.frames import MAX_FRAME_BYTES
@@ -34,6 +37,19 @@ def test_time_to_alarm_over_udp_with_field_timing():
 def test_time_to_alarm_sealed_and_over_tcp(transport, sealed):
     result = asyncio.run(time_to_alarm(FAST, transport=transport, sealed=sealed))
     assert result.centre_cycles <= 2 and result.time_to_alarm_s <= TIME_TO_ALARM_LIMIT_S, result
+
+
+@pytest.mark.timeout(60)
+def test_time_to_alarm_worst_phase_fault_just_after_a_cycle():
+    # the fault lands just after the centre's cycle began: it waits a whole cycle for the next one
+    result = asyncio.run(time_to_alarm(FIELD, transport="udp", phase_s=0.01))
+    assert result.centre_cycles <= 2 and result.time_to_alarm_s <= TIME_TO_ALARM_LIMIT_S, result
+
+
+def test_demo_command():
+    out = CliRunner().invoke(app, ["demo", "--cycle-ms", "50"])
+    assert out.exit_code == 0, out.output
+    assert "RBC alarm SECTION_DO_NOT_USE after" in out.output
 
 
 @pytest.mark.timeout(60)
