@@ -16,7 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from augnet.gnss import time as gtime
+from augnet.gnss.rtcm.batch import encode_msm_batch
 from augnet.gnss.rtcm.codec import RtcmMessage, encode_frame, text_fields
+from augnet.gnss.rtcm.layouts import MSM_MAX_CELLS
 from augnet.gnss.rtcm.observables import Observables, observables_to_msm_list
 from augnet.gnss.signals import by_rinex
 from stations.ephemeris_messages import ephemeris_message
@@ -84,47 +86,83 @@ class RtcmStreams:
     def add(self, blk: EpochBlock) -> None:
         w = self.world
         sc = w.scenario
+        E = len(blk.t_gpst)
         rows = w.nav.select(w.sats, blk.t_gpst)  # (E, N): the set each satellite broadcasts
-        for e, t in enumerate(blk.t_gpst):
-            t_rel = float(t - w.t0)
-            for i, rx in enumerate(w.receivers):
-                out = bytearray()
-                tracked = blk.observed[e, i].any(-1)
-                if not tracked.any():
+        for i, rx in enumerate(w.receivers):
+            tracked = blk.observed[:, i].any(-1)  # (E, N)
+            heads = [bytearray() for _ in range(E)]
+            for e in range(E):
+                if not tracked[e].any():
                     continue  # nothing received (outage, tunnel): the receiver sends nothing
+                t_rel = float(blk.t_gpst[e] - w.t0)
                 if t_rel - self._last_station_msgs[rx.id] >= sc.rtcm_station_interval_s - 1e-9:
-                    out += self._static[rx.id] + self._descr[rx.id]
+                    heads[e] += self._static[rx.id] + self._descr[rx.id]
                     self._last_station_msgs[rx.id] = t_rel
                 sent = self._sent_set[rx.id]
                 periodic = t_rel - self._last_eph[rx.id] >= sc.rtcm_ephemeris_interval_s - 1e-9
-                due = tracked & (rows[e] >= 0) & (periodic | (rows[e] != sent))
+                due = tracked[e] & (rows[e] >= 0) & (periodic | (rows[e] != sent))
                 if periodic:
                     self._last_eph[rx.id] = t_rel
                 for j in np.flatnonzero(due):
-                    out += self._eph_frame(int(rows[e, j]))
+                    heads[e] += self._eph_frame(int(rows[e, j]))
                     sent[j] = rows[e, j]
-                msgs = []
-                for s in self.systems:
-                    cols = self._sat_cols[s]
-                    K = len(sc.signals[s])
-                    obs = Observables(
-                        system=s, sat_ids=self._prn[cols], sig_ids=self._sig_ids[s],
-                        pseudorange_m=blk.pseudorange_m[e, i, cols, :K], phase_cycles=blk.phase_cyc[e, i, cols, :K],
-                        doppler_hz=blk.doppler_hz[e, i, cols, :K], cnr_dbhz=blk.cnr_dbhz[e, i, cols, :K],
-                        lock_ms=blk.lock_time_s[e, i, cols, :K] * 1000.0,
-                        half_cycle=(blk.lli[e, i, cols, :K] & 2) != 0)
-                    if not blk.observed[e, i, cols, :K].any():
-                        continue
-                    msgs.append(observables_to_msm_list(obs, MSM_LEVEL, rx.rtcm_id, msm_epoch_ms(s, float(t)),
-                                                        multiple=1))
-                for n, group in enumerate(msgs):
-                    for k, m in enumerate(group):
-                        if n == len(msgs) - 1 and k == len(group) - 1:
-                            m.multiple = 0  # the epoch's last MSM
-                        out += encode_frame(m)
+            msm = self._msm_frames(blk, i)
+            for e in range(E):
+                if not tracked[e].any():
+                    continue
+                out = bytes(heads[e]) + b"".join(msm[s][e] for s in self.systems if e in msm[s])
                 self.buffers[rx.id] += out
                 if self.keep_epochs:
-                    self.epoch_bytes[rx.id].append((float(t), bytes(out)))
+                    self.epoch_bytes[rx.id].append((float(blk.t_gpst[e]), out))
+
+    def _msm_frames(self, blk: EpochBlock, i: int) -> dict[str, dict[int, bytes]]:
+        """MSM7 frames of receiver i for every epoch of the block, per system: {system: {epoch: bytes}}.
+
+        One batch encode per system over the block's epochs (epochs play the batch encoder's
+        receiver axis); the epoch's last system gets the multiple-message bit 0, the others 1.
+        """
+        w = self.world
+        sc = w.scenario
+        rx = w.receivers[i]
+        E = len(blk.t_gpst)
+        present = {s: blk.observed[:, i, self._sat_cols[s], :len(sc.signals[s])].any(axis=(1, 2))
+                   for s in self.systems}
+        last = np.full(E, "", dtype="<U1")
+        for s in self.systems:
+            last = np.where(present[s], s, last)
+        out: dict[str, dict[int, bytes]] = {}
+        for s in self.systems:
+            cols = self._sat_cols[s]
+            K = len(sc.signals[s])
+            frames: dict[int, bytes] = {}
+            for multiple in (0, 1):
+                ep = np.flatnonzero(present[s] & ((last == s) == (multiple == 0)))
+                if not len(ep):
+                    continue
+                pr = blk.pseudorange_m[ep][:, i][:, cols, :K]
+                cells = (~np.isnan(pr)).sum(axis=(1, 2))
+                ph = blk.phase_cyc[ep][:, i][:, cols, :K]
+                dop = blk.doppler_hz[ep][:, i][:, cols, :K]
+                cnr = blk.cnr_dbhz[ep][:, i][:, cols, :K]
+                lock = blk.lock_time_s[ep][:, i][:, cols, :K] * 1000.0
+                half = (blk.lli[ep][:, i][:, cols, :K] & 2) != 0
+                epochs = np.array([msm_epoch_ms(s, float(t)) for t in blk.t_gpst[ep]])
+                small = cells <= MSM_MAX_CELLS
+                if small.any():
+                    k = np.flatnonzero(small)
+                    batch = encode_msm_batch(s, MSM_LEVEL, self._prn[cols], self._sig_ids[s], rx.rtcm_id,
+                                             epochs[k], pr[k], ph[k], dop[k], cnr[k], lock[k], half[k],
+                                             multiple=multiple)
+                    for n, e in enumerate(ep[k]):
+                        frames[int(e)] = batch[n]
+                for n in np.flatnonzero(~small):  # more than 64 cells: split over several messages
+                    obs = Observables(system=s, sat_ids=self._prn[cols], sig_ids=self._sig_ids[s],
+                                      pseudorange_m=pr[n], phase_cycles=ph[n], doppler_hz=dop[n],
+                                      cnr_dbhz=cnr[n], lock_ms=lock[n], half_cycle=half[n])
+                    msgs = observables_to_msm_list(obs, MSM_LEVEL, rx.rtcm_id, int(epochs[n]), multiple=multiple)
+                    frames[int(ep[n])] = b"".join(encode_frame(m) for m in msgs)
+            out[s] = frames
+        return out
 
     def write(self, out_dir: Path) -> list[str]:
         files = []

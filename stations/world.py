@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -425,9 +424,3 @@ class World:
             orbit_error_range_m=orbit_err_range, stec_tecu=stec, tropo_m=tropo, ambiguity_cyc=amb,
             multipath_code_m=mpc_out, multipath_phase_m=mpp_out)
 
-
-def load_nav_file(path: str | Path) -> list[Ephemeris]:
-    """Broadcast ephemerides from a RINEX 3 navigation file (the --nav option)."""
-    from augnet.gnss.rinex import nav as rinex_nav
-
-    return list(rinex_nav.read_nav(path))

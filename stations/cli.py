@@ -1,0 +1,119 @@
+"""Command line: `augnet sim ...` (scenarios, recording) and `augnet stations ...` (live streaming)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from stations.scenario import BUILTIN_SCENARIOS, DEFAULT_SCENARIO, ScenarioError, load_scenario, resolved_dict
+
+sim_app = typer.Typer(no_args_is_help=True, help="Simulated world: scenarios and recordings.")
+stations_app = typer.Typer(no_args_is_help=True, help="Simulated reference stations and trains, live.")
+
+
+def _load(scenario: str, duration: Optional[float], seed: Optional[int]):
+    try:
+        sc = load_scenario(scenario)
+    except ScenarioError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2)
+    update = {}
+    if duration is not None:
+        if duration <= 0:
+            typer.echo(f"error: --duration must be positive, got {duration}", err=True)
+            raise typer.Exit(2)
+        update["duration_s"] = duration
+    if seed is not None:
+        update["seed"] = seed
+    return sc.model_copy(update=update) if update else sc
+
+
+def nav_ephemerides_for(sc, nav_path: Path):
+    """Ephemerides from a RINEX nav file, and the scenario moved to the file's day if needed."""
+    from augnet.gnss import time as gtime
+    from augnet.gnss.ephemeris import NavigationData
+    from augnet.gnss.rinex.nav import read_nav
+
+    ephs = [e for e in read_nav(nav_path).ephemerides if e.system in sc.constellations]
+    if not ephs:
+        raise ScenarioError(f"--nav {nav_path}: no {'/'.join(sc.constellations)} ephemerides in the file")
+    nav = NavigationData(ephs)
+    t0 = gtime.from_datetime(sc.start)
+    if (nav.select(nav.satellites, t0) >= 0).sum() < 4:
+        # the scenario's start is not covered: start one hour after the file's first toe, on the hour
+        first = min(e.toe_gpst for e in ephs)
+        start = gtime.to_datetime(float((first // 3600 + 1) * 3600))
+        typer.echo(f"note: {nav_path.name} does not cover {sc.start}; starting at {start} GPST instead", err=True)
+        sc = sc.model_copy(update=dict(start=start))
+    return sc, ephs
+
+
+@sim_app.command("list")
+def list_scenarios() -> None:
+    """The built-in scenarios."""
+    for name in BUILTIN_SCENARIOS:
+        sc = load_scenario(name)
+        mark = " (default)" if name == DEFAULT_SCENARIO else ""
+        typer.echo(f"{name:<15} {sc.description}{mark}")
+
+
+@sim_app.command("show")
+def show(scenario: str = typer.Argument(DEFAULT_SCENARIO, help="built-in name or YAML file")) -> None:
+    """Validate a scenario and print it resolved (JSON): every default and preset filled in."""
+    sc = _load(scenario, None, None)
+    typer.echo(json.dumps(resolved_dict(sc), indent=2, sort_keys=True))
+
+
+@sim_app.command("record")
+def record_cmd(
+    scenario: str = typer.Argument(DEFAULT_SCENARIO, help="built-in name or YAML file"),
+    duration: Optional[float] = typer.Option(None, "--duration", help="seconds to simulate"),
+    out: Path = typer.Option(Path("runs/sim"), "--out", help="output folder"),
+    seed: Optional[int] = typer.Option(None, "--seed", help="override the scenario's seed"),
+    nav: Optional[Path] = typer.Option(None, "--nav", help="RINEX 3 nav file instead of the nominal constellation"),
+    rtcm: bool = typer.Option(True, "--rtcm/--no-rtcm", help="write <id>.rtcm3 streams"),
+) -> None:
+    """Run a scenario faster than real time and write RINEX, RTCM, truth and the resolved scenario."""
+    from stations.record import record
+
+    sc = _load(scenario, duration, seed)
+    ephs = None
+    if nav is not None:
+        try:
+            sc, ephs = nav_ephemerides_for(sc, nav)
+        except (ScenarioError, OSError, ValueError) as exc:
+            typer.echo(f"error: {exc}", err=True)
+            raise typer.Exit(2)
+    summary = record(sc, out, nav_ephemerides=ephs, rtcm=rtcm)
+    speed = summary.seconds_simulated / max(summary.seconds_wall, 1e-9)
+    typer.echo(f"{sc.name}: {summary.n_epochs} epochs x {len(summary.receivers)} receivers "
+               f"({', '.join(summary.receivers)}) in {summary.seconds_wall:.1f} s = {speed:.0f}x real time")
+    typer.echo(f"wrote {out}/: {', '.join(summary.files)}")
+
+
+@stations_app.command("run")
+def run_cmd(
+    scenario: str = typer.Argument(DEFAULT_SCENARIO, help="built-in name or YAML file"),
+    caster: str = typer.Option(..., "--caster", help="HOST:PORT of the NTRIP caster"),
+    password: str = typer.Option("", "--password", help="source password (NTRIP 1) / credentials"),
+    user: str = typer.Option("", "--user", help="NTRIP 2 user"),
+    duration: Optional[float] = typer.Option(None, "--duration", help="seconds to stream"),
+    speed: float = typer.Option(1.0, "--speed", help="playback speed (1 = real time)"),
+) -> None:
+    """Stream every station (mountpoint = its id) and train (TRAIN-<id>-RAW) to an NTRIP caster."""
+    import asyncio
+
+    from stations.live import run_stations
+
+    sc = _load(scenario, duration, None)
+    host, _, port = caster.rpartition(":")
+    if not host or not port.isdigit():
+        typer.echo(f"error: --caster must be HOST:PORT, got {caster!r}", err=True)
+        raise typer.Exit(2)
+    asyncio.run(run_stations(sc, host, int(port), user=user, password=password, speed=speed))
+
+
+__all__ = ["sim_app", "stations_app"]
