@@ -336,7 +336,7 @@ def group_delay_s(table: EphemerisTable, rinex_code: str) -> np.ndarray:
     c = table.columns
     band = rinex_code[0]
     sysl = table.system
-    out = np.full(len(sysl), np.nan)
+    out = np.full(sysl.shape, np.nan)
     gps = (sysl == "G") | (sysl == "J")
     if band == "1":
         out = np.where(gps, c["tgd"], out)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gzip
 import math
 
 import pytest
@@ -90,3 +91,19 @@ def test_synthetic_round_trip_all_systems_and_gzip(tmp_path):
     # The file works as input to orbit computation (a BDS GEO id among them).
     nav = NavigationData(back)
     assert nav.table.is_geo.tolist() == [False, False, True, False, False]
+
+
+def test_rinex2_gps_nav_gzip(shared_data):
+    path = shared_data / "rinex" / "nl-network-2021" / "cbw10010.21n.gz"
+    nav = read_nav(path)
+    assert nav.header.version == 2.11 and nav.header.system == "G"
+    lines = gzip.decompress(path.read_bytes()).decode().splitlines()
+    body = lines[next(i for i, line in enumerate(lines) if "END OF HEADER" in line) + 1 :]
+    assert len(nav) == len(body) // 8
+    first = nav.ephemerides[0]
+    # " 1 21  1  1  2  0  0.0 7.874774746600D-04-5.911715561520D-12 0.000000000000D+00"
+    assert (first.sat, first.week, first.toe, first.toc) == ("G01", 2138, 439200.0, 439200.0)
+    assert first.af0 == 7.874774746600e-04 and first.tgd == 5.122274160390e-09 and first.iodc == 52
+    # A record timed in the previous year (2020-12-31 23:59:44) lands in the same GPS week.
+    g07 = next(e for e in nav if e.sat == "G07")
+    assert g07.toc == 431984.0 and g07.toe == 431984.0

@@ -27,6 +27,11 @@ from augnet.gnss.rinex.errors import (
 )
 
 ORBIT_LINES = {"G": 7, "E": 7, "C": 7, "J": 7, "I": 7, "R": 3, "S": 3}
+# RINEX 2: one system per file, named by the file type letter (RINEX 2.11 Tables A3, A10, A16).
+V2_NAV_TYPES = {"N": "G", "G": "R", "H": "S"}
+V2_ORBIT_LINES = {"G": 7, "R": 3, "S": 3}
+V2_FIRST_LINE_DATA_COLUMN = 22
+V2_ORBIT_DATA_COLUMN = 3
 KEPLER_SYSTEMS = ("G", "E", "C", "J")
 FIELD_WIDTH = 19  # D19.12
 FIRST_LINE_DATA_COLUMN = 23
@@ -69,9 +74,12 @@ def _label(line: str) -> str:
 
 
 def read_nav(path: str | os.PathLike) -> NavFile:
-    """Read a RINEX 3 navigation file (plain or gzip)."""
+    """Read a RINEX navigation file (plain or gzip): 3.00-3.05 mixed, or 2.xx GPS ('N'); RINEX 2
+    GLONASS ('G') and SBAS ('H') files read as all-skipped."""
     lines = read_lines(path)
     header, body_start = _read_header(lines, path)
+    if header.version < 3.0:
+        return _read_body_v2(lines, body_start, header, path)
     ephs: list[Ephemeris] = []
     skipped: dict[str, int] = {}
     i = body_start
@@ -114,11 +122,14 @@ def _read_header(lines: list[str], path) -> tuple[NavHeader, int]:
     if _label(first) != "RINEX VERSION / TYPE":
         raise RinexError(path, 1, "first line is not 'RINEX VERSION / TYPE'")
     version = parse_float(first[0:9], path, 1, "RINEX version", blank=-1.0)
-    if not 3.0 <= version < 4.0:
-        raise RinexError(path, 1, f"RINEX version {version} not supported (3.00-3.05)")
-    if first[20:21] != "N":
-        raise RinexError(path, 1, f"not a navigation file (file type {first[20:21]!r})")
-    hdr = NavHeader(version=version, system=first[40:41].strip() or "M")
+    if not 2.0 <= version < 4.0:
+        raise RinexError(path, 1, f"RINEX version {version} not supported (2.xx, 3.00-3.05)")
+    file_type = first[20:21]
+    if file_type != "N" and not (version < 3.0 and file_type in V2_NAV_TYPES):
+        raise RinexError(path, 1, f"not a navigation file (file type {file_type!r})")
+    # RINEX 2: the file type letter says the system (N GPS, G GLONASS, H SBAS); 3: column 41.
+    system = V2_NAV_TYPES[file_type] if version < 3.0 else (first[40:41].strip() or "M")
+    hdr = NavHeader(version=version, system=system)
     for k in range(1, len(lines)):
         line = lines[k]
         label = _label(line)
@@ -171,9 +182,56 @@ def _decode_record(block: list[str], path, line_no: int) -> Ephemeris:
     d = _fields(head, FIRST_LINE_DATA_COLUMN, 3, path, line_no)
     for k, line in enumerate(block[1:], start=1):
         d.extend(_fields(line, ORBIT_DATA_COLUMN, 4, path, line_no + k))
+    return _ephemeris_from_fields(system, prn, toc_label, d, path, line_no)
+
+
+def _read_body_v2(lines: list[str], start: int, header: NavHeader, path) -> NavFile:
+    """RINEX 2.xx: 'PRN yy mm dd hh mm ss.s' (I2, 5I3, F5.1) then 3 D19.12 from column 23, and
+    orbit lines of 3X, 4D19.12.  A PRN below 10 starts with a blank, so records are counted, not
+    recognised by their first column."""
+    per_record = 1 + V2_ORBIT_LINES[header.system]
+    ephs: list[Ephemeris] = []
+    skipped: dict[str, int] = {}
+    i = start
+    n = len(lines)
+    while i < n:
+        if not lines[i].strip():
+            i += 1
+            continue
+        if i + per_record > n:
+            raise RinexError(path, n, f"record starting at line {i + 1} truncated: expected {per_record} lines")
+        block = lines[i : i + per_record]
+        head = block[0]
+        prn_text = head[0:2].strip()
+        parts = head[2:22].split()
+        if not is_ascii_digits(prn_text) or len(parts) != 6 or not all(is_ascii_digits(p) for p in parts[:5]):
+            raise RinexError(path, i + 1, f"bad record start {head[:22]!r} (PRN yy mm dd hh mm ss.s)")
+        sec = parse_float(parts[5], path, i + 1, "epoch seconds")
+        yy, mo, dd, hh, mi = (int(p) for p in parts[:5])
+        year = yy + (2000 if yy < 80 else 1900)  # RINEX 2 two-digit years: 80-99 -> 19xx
+        try:
+            toc_label = gtime.from_calendar(year, mo, dd, hh, mi, sec)
+        except gtime.TimeError as exc:
+            raise RinexError(path, i + 1, str(exc)) from None
+        if header.system != "G":
+            skipped[header.system] = skipped.get(header.system, 0) + 1
+            i += per_record
+            continue
+        d = _fields(head, V2_FIRST_LINE_DATA_COLUMN, 3, path, i + 1)
+        for k, line in enumerate(block[1:], start=1):
+            if line[:3].strip():
+                raise RinexError(path, i + 1 + k, f"expected an orbit line, got {line[:22]!r}")
+            d.extend(_fields(line, V2_ORBIT_DATA_COLUMN, 4, path, i + 1 + k))
+        ephs.append(_ephemeris_from_fields("G", int(prn_text), toc_label, d, path, i + 1))
+        i += per_record
+    return NavFile(header, ephs, skipped)
+
+
+def _ephemeris_from_fields(system: str, prn: int, toc_label: float, d: list[float], path, line_no: int) -> Ephemeris:
+    """The record's numbers in RINEX order -> Ephemeris (per-system meaning of orbits 5-7)."""
     # d[] indices follow the RINEX order: 0-2 clock, 3-6 orbit 1, ..., 27-30 orbit 7.
     if d[10] <= 0.0:
-        raise RinexError(path, line_no + 3, f"{head[:3]}: sqrt(A) must be positive, got {d[10]}")
+        raise RinexError(path, line_no + 2, f"{system}{prn:02d}: sqrt(A) must be positive, got {d[10]}")
     week_file = int(round(d[21]))
     if system == "C":
         week = week_file  # BDT week
