@@ -127,6 +127,8 @@ class LoadClient(asyncio.Protocol):
         self.bad = 0
         self.status = ""
         self.closed = False
+        self.chunked = False
+        self.junk = 0
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         self.transport = transport  # type: ignore[assignment]
@@ -154,6 +156,8 @@ class LoadClient(asyncio.Protocol):
                     return
                 self.status = self.buf[:self.buf.find(b"\r\n")].decode("latin-1")
                 ok = self.status.startswith("HTTP/1.1 200")
+                # Some casters (Millipede) answer v2 without chunked coding: follow the reply.
+                self.chunked = b"transfer-encoding: chunked" in bytes(self.buf[:end]).lower()
                 rest = bytes(self.buf[end + 4:])
             self.buf = bytearray()
             self.head_done = True
@@ -165,7 +169,7 @@ class LoadClient(asyncio.Protocol):
             if not rest:
                 return
             data = rest
-        if self.spec.version == 2:
+        if self.chunked:
             if not self.raw and self.chunk_left == 0:
                 # Fast path: the caster writes each chunk whole, so a read is usually one chunk.
                 end = data.find(b"\r\n", 0, 12)
@@ -231,10 +235,11 @@ class LoadClient(asyncio.Protocol):
         pos = 0
         n = len(buf)
         while n - pos >= 6:
-            if buf[pos] != 0xD3:
-                self.bad += 1
+            if buf[pos] != 0xD3:  # bytes between frames (e.g. a caster's extra CRLF after ICY)
                 nxt = buf.find(b"\xd3", pos + 1)
-                pos = n if nxt < 0 else nxt
+                end = n if nxt < 0 else nxt
+                self.junk += end - pos
+                pos = end
                 continue
             total = (((buf[pos + 1] & 3) << 8) | buf[pos + 2]) + 6
             if n - pos < total:
@@ -295,7 +300,7 @@ def _worker(specs: list[ClientSpec], ctl: Any, use_uvloop: bool) -> None:
         ctl.send(("ready", connected, statuses))
         loop = asyncio.get_running_loop()
         await loop.run_in_executor(None, ctl.recv)  # "stop"
-        result = [(sorted(c.latency_ns.items()), c.bad, c.closed) for c in clients]
+        result = [(sorted(c.latency_ns.items()), c.bad, c.junk) for c in clients]
         ctl.send(("result", result))
         for c in clients:
             if c.transport is not None:
@@ -478,16 +483,17 @@ def run_load(s: LoadSettings) -> dict[str, Any]:
         cpu_s, window_s, rss_peak = loop.run_until_complete(epochs())
         measured = range(s.warmup_epochs, s.warmup_epochs + s.epochs)
         lat: list[int] = []
-        complete = lost = bad = 0
+        complete = lost = bad = junk = 0
         for pipe in pipes:
             pipe.send("stop")
         for pipe in pipes:
             if not pipe.poll(120):
                 raise RuntimeError("a load worker did not return its results")
             _tag, result = pipe.recv()
-            for items, n_bad, _closed in result:
+            for items, n_bad, n_junk in result:
                 got = dict(items)
                 bad += n_bad
+                junk += n_junk
                 missing = sum(1 for e in measured if e not in got)
                 lost += missing
                 complete += missing == 0
@@ -518,6 +524,7 @@ def run_load(s: LoadSettings) -> dict[str, Any]:
         "label": s.label or ("augnet" if spawned is not None else s.target),
         "requested": s.clients, "connected": connected, "complete": complete,
         "epochs": s.epochs, "lost_epochs": lost, "bad_frames": bad,
+        "junk_bytes": junk,
         "latency_ms": _percentiles(lat), "samples": len(lat),
         "caster_cpu_percent": round(100.0 * cpu_s / window_s, 1) if caster else None,
         "caster_rss_mb": round(rss_peak / 2**20, 1) if caster else None,
