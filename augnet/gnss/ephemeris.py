@@ -449,10 +449,17 @@ class NavigationData:
         """
         idx = self.select(sats, t_gpst)
         valid = idx >= 0
+        if not len(self.table):
+            return _nan_state(idx.shape), valid
         rows = self.table.take(np.where(valid, idx, 0))
         t = np.broadcast_to(np.asarray(t_gpst, dtype=float)[..., None], idx.shape)
         st = satellite_state(rows, t)
         return _mask_state(st, valid), valid
+
+
+def _nan_state(shape: tuple[int, ...]) -> SatelliteState:
+    nan3, nan1 = np.full(shape + (3,), np.nan), np.full(shape, np.nan)
+    return SatelliteState(nan3, nan3.copy(), nan1, nan1.copy(), nan1.copy())
 
 
 def _mask_state(st: SatelliteState, valid: np.ndarray) -> SatelliteState:
@@ -501,6 +508,11 @@ def transit(nav: NavigationData, sats: Sequence[str], receiver_ecef_m, t_receive
     rx = np.asarray(receiver_ecef_m, dtype=float)
     idx = nav.select(sats, t_rx)
     valid = idx >= 0
+    if not len(nav.table):
+        st = _nan_state(idx.shape)
+        nan1 = np.full(idx.shape, np.nan)
+        return Transit(nan1, nan1.copy(), st.position_m, st.velocity_m_s, st.clock_bias_s,
+                       st.clock_drift_s_s, np.full(idx.shape + (3,), np.nan), idx, valid)
     rows = nav.table.take(np.where(valid, idx, 0))
     _, omge, _ = _system_constants(rows.system)
     t_rx_b = np.broadcast_to(t_rx[..., None], idx.shape)

@@ -191,3 +191,15 @@ def test_transit_geometry_many_epochs_and_receivers(nav2023):
     assert np.nanmax(np.abs(tr2.range_m - tr.range_m)) > 100.0
     # Los vectors are unit vectors.
     assert np.allclose(np.linalg.norm(tr.line_of_sight[v], axis=-1), 1.0)
+
+
+def test_no_ephemeris_gives_nan_not_an_error():
+    empty = NavigationData([])
+    st_, valid = empty.states(["G01", "E02"], np.array([1.3e9, 1.3e9 + 1.0]))
+    assert st_.position_m.shape == (2, 2, 3) and not valid.any() and np.isnan(st_.clock_bias_s).all()
+    tr = transit(empty, ["C01"], [6.4e6, 0.0, 0.0], 1.3e9)
+    assert tr.range_m.shape == (1,) and np.isnan(tr.range_m).all()
+    # A satellite without ephemeris among others: NaN in its column only.
+    nav = NavigationData([G01])
+    tr = transit(nav, ["G01", "G02"], [6.4e6, 0.0, 0.0], G01.toe_gpst)
+    assert np.isfinite(tr.range_m[0]) and np.isnan(tr.range_m[1])
