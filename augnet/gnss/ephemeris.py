@@ -410,7 +410,9 @@ class NavigationData:
         self._usable = usable
         self._by_sat: dict[str, np.ndarray] = {}
         for sat in np.unique(tb.sat):
-            self._by_sat[str(sat)] = np.flatnonzero((tb.sat == sat) & usable)
+            rows = np.flatnonzero((tb.sat == sat) & usable)
+            # Latest toe first: argmin below returns the first of equal distances, the newer set.
+            self._by_sat[str(sat)] = rows[np.argsort(-tb.toe_gpst[rows], kind="stable")]
 
     def __len__(self) -> int:
         return len(self.table)
@@ -435,8 +437,7 @@ class NavigationData:
             dt = t[..., None] - tb.toe_gpst[cand]  # (T..., k)
             ok = np.abs(dt) <= self._max_dist[cand]
             ok &= (tb.system[cand] != "E") | (dt > 0.0)
-            # Nearest toe; among equals the later toe (subtract a tiny preference for later toe).
-            cost = np.where(ok, np.abs(dt) - 1e-6 * (tb.toe_gpst[cand] - tb.toe_gpst[cand].min()) / 86400.0, np.inf)
+            cost = np.where(ok, np.abs(dt), np.inf)  # nearest toe; ties -> later toe (order above)
             best = np.argmin(cost, axis=-1)
             found = np.take_along_axis(ok, best[..., None], axis=-1)[..., 0]
             out[..., j] = np.where(found, cand[best], -1)

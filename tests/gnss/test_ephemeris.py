@@ -136,6 +136,12 @@ def test_selection_rules(nav2023, nav2024):
     # A Galileo set whose data sources were not recorded (0) is used under either preference.
     unknown = [e.replace(data_sources=0) for e in nav2024 if e.system == "E" and e.data_sources == 258]
     assert NavigationData(unknown, galileo_source="inav").select([unknown[0].sat], t1)[0] >= 0
+    # Midway between two GPS toes (2 h apart): the later set wins the tie.
+    g14 = sorted((e for e in nav2023 if e.sat == "G14" and e.health == 0), key=lambda e: e.toe_gpst)
+    pair = next((a, b) for a, b in zip(g14, g14[1:]) if b.toe_gpst - a.toe_gpst == 7200.0)
+    mid = 0.5 * (pair[0].toe_gpst + pair[1].toe_gpst)
+    assert nav.table.records[nav.select(["G14"], mid)[0]] == pair[1]
+    assert nav.table.records[nav.select(["G14"], mid - 1.0)[0]] == pair[0]
     # Vectorised over epochs: T x N.
     times = t0 + np.arange(0.0, 3600.0, 600.0)
     assert nav.select(["G01", "E07", "C06"], times).shape == (6, 3)
