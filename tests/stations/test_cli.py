@@ -1,0 +1,57 @@
+"""Command line: `augnet sim ...` refuses bad input with the reason, records, and takes --nav."""
+
+from __future__ import annotations
+
+import csv
+
+import pytest
+from typer.testing import CliRunner
+
+from stations.cli import sim_app
+
+runner = CliRunner()
+
+
+def test_list_names_builtins():
+    res = runner.invoke(sim_app, ["list"])
+    assert res.exit_code == 0
+    for name in ("demo", "baseline-10km", "network-70km", "iono-storm"):
+        assert name in res.output
+
+
+def test_invalid_scenario_refused_with_field_value_allowed(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: x\nrate_hz: fast\nstations: [{id: A, lat_deg: 95, lon_deg: 0, h_m: 0}]\n")
+    res = runner.invoke(sim_app, ["record", str(bad), "--out", str(tmp_path / "o")])
+    assert res.exit_code == 2
+    assert "stations.0.lat_deg = 95" in res.output and "less than or equal to 90" in res.output
+    assert "rate_hz = 'fast'" in res.output
+    assert not (tmp_path / "o").exists()
+    res = runner.invoke(sim_app, ["record", "demo", "--duration", "-5", "--out", str(tmp_path / "o")])
+    assert res.exit_code == 2 and "--duration" in res.output
+
+
+def test_record_short(tmp_path):
+    res = runner.invoke(sim_app, ["record", "baseline-10km", "--duration", "5", "--out", str(tmp_path)])
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "A.obs").is_file() and (tmp_path / "B.rtcm3").is_file()
+    assert "x real time" in res.output
+
+
+def test_show_resolves_presets():
+    res = runner.invoke(sim_app, ["show", "iono-storm"])
+    assert res.exit_code == 0
+    assert '"ionosphere_resolved"' in res.output and '"vtec_tecu": 60.0' in res.output
+
+
+@pytest.mark.shared_data
+def test_record_with_real_nav_file(shared_data, tmp_path):
+    nav = shared_data / "nav" / "brdm-2023-07-11.nav"
+    res = runner.invoke(sim_app, ["record", "baseline-10km", "--duration", "10", "--out", str(tmp_path),
+                                  "--nav", str(nav), "--no-rtcm"])
+    assert res.exit_code == 0, res.output
+    rows = list(csv.DictReader(open(tmp_path / "truth.csv")))
+    assert rows[0]["gpst_calendar"].startswith("2023-07-11")
+    atmo = list(csv.DictReader(open(tmp_path / "atmosphere.csv")))
+    sats = {r["sat"] for r in atmo}
+    assert any(s.startswith("G") for s in sats) and any(s.startswith("C") for s in sats)
