@@ -228,15 +228,21 @@ def leap_seconds_at_utc(t_utc: _dt.datetime) -> int:
     return n
 
 
-def leap_seconds_at_gpst(t_gpst: float) -> int:
-    """GPST - UTC [s] at a GPST instant (the table's start dates are UTC, shifted into GPST)."""
-    t = float(t_gpst)
-    n = 0
-    for start, leap in LEAP_SECONDS:
-        # The leap second starting at UTC `start` takes effect at GPST start + leap.
-        if t >= from_datetime(start) + leap:
-            n = leap
-    return n
+# The leap second starting at UTC `start` takes effect at GPST start + leap.
+_LEAP_STARTS_GPST = np.array([from_datetime(start) + leap for start, leap in LEAP_SECONDS])
+_LEAP_VALUES = np.array([0] + [leap for _, leap in LEAP_SECONDS])
+
+
+def leap_seconds_at_gpst(t_gpst):
+    """GPST - UTC [s] at GPST instant(s); an int for a scalar, an int array for an array."""
+    t = np.asarray(t_gpst, dtype=float)
+    n = _LEAP_VALUES[np.searchsorted(_LEAP_STARTS_GPST, t, side="right")]
+    return int(n) if n.ndim == 0 else n
+
+
+def gpst_to_utc_seconds(t_gpst):
+    """UTC as seconds since 1980-01-06 00:00:00 UTC (no leap seconds counted), vectorised."""
+    return np.asarray(t_gpst, dtype=float) - leap_seconds_at_gpst(t_gpst)
 
 
 def utc_to_gpst(t_utc: _dt.datetime) -> float:

@@ -60,6 +60,10 @@ def test_leap_seconds():
     )
     with pytest.raises(gt.TimeError):
         gt.leap_seconds_at_utc(dt.datetime(1979, 1, 1))
+    # Vectorised, for NMEA time stamps of many epochs.
+    t17 = gt.from_calendar(2017, 1, 1)
+    assert gt.leap_seconds_at_gpst(np.array([t17 + 16.9, t17 + 18.0, 0.0])).tolist() == [17, 18, 0]
+    assert gt.gpst_to_utc_seconds(np.array([t17 + 18.0]))[0] == t17
 
 
 def test_calendar_rounding_carries_and_bad_dates_raise():
