@@ -25,6 +25,10 @@ Receive rules (rssp1.md "Synchronisation and freshness"), in the order applied t
                                         -> dropped, `late`                           (delay)
 8. otherwise accepted; the first accepted RSD after an SSR brings the link up.
 
+While the link is up, accepted frames arriving at lag deltaTime - 1 trigger a refresh SSE; its SSR
+(taken only if its timestamp continues the verified chain) re-anchors the estimate, so clock drift
+between the two ends never drops an authentic link (see _refresh_anchor).
+
 The SVC check runs before the gap rule so that only a frame that proves it comes from the peer can
 take the link down. A local watchdog drops the link after DelayTime cycles in a row without an
 accepted RSD (`timeout`), which also catches a stream that is entirely late or that never verifies
@@ -129,6 +133,7 @@ class Endpoint:
         self._anchor_cycle = 0
         self._missed_cycles = 0
         self._good_since_tick = False
+        self._refresh_wanted = False
 
     # ----------------------------------------------------------------- receiving
     def receive(self, frame: bytes | bytearray | memoryview) -> list[Event]:
@@ -162,6 +167,8 @@ class Endpoint:
             return self._drop("ssr_num_dataver")
         t_r = checkword.timestamp_from_ssr(ssr.seqini, self._sse_seqenq, self.peer.sid, self.peer.dataver)
         self._sse_tc_e = None
+        if self.state is LinkState.UP:
+            return self._refresh_anchor(ssr.tc_r, t_r)
         # The RSD sent with TC_R itself is not taken: at TC_R an error d in the SID we hold for the
         # peer cancels out (the SSR gives us T ^ d, the RSD claims T ^ d). From TC_R + k on, the
         # prediction carries M^k d instead, and I ^ M^k is invertible for the gaps a link allows
@@ -173,6 +180,25 @@ class Endpoint:
         self._missed_cycles = 0
         self.state = LinkState.SYNCING
         self.stats["ssr_accepted"] += 1
+        return []
+
+    def _refresh_anchor(self, tc_r: int, t_r: tuple[int, int]) -> list[Event]:
+        """An SSR answering a refresh SSE while the link is up: re-anchor the estimate of the peer's TC.
+
+        Clock drift: the peer's TC and our local cycle count drift apart (100 ppm is one cycle in
+        10,000), and without this the freshness rule would eventually drop authentic frames and take
+        the link down. When accepted frames come in at lag deltaTime - 1, we ask for a fresh SSR
+        (bounded by lifeTime, so it cannot hide a delay beyond the limits) and move the estimate to it.
+        Its timestamp must continue the chain we verify RSDs with, else it is refused.
+        """
+        ahead = (tc_r - self._last_tc) % TC_MODULUS
+        if ahead >= TC_MODULUS // 2:
+            return self._drop("ssr_stale")
+        predicted = (TIMESTAMP_CH1.advance(self._last_t[0], ahead), TIMESTAMP_CH2.advance(self._last_t[1], ahead))
+        if predicted != t_r:
+            return self._drop("ssr_inconsistent")
+        self._anchor_tc, self._anchor_cycle = tc_r, self.local_cycle
+        self.stats["ssr_refresh"] += 1
         return []
 
     def _receive_rsd(self, rsd: Rsd) -> list[Event]:
@@ -195,6 +221,8 @@ class Endpoint:
         if lag < TC_MODULUS // 2:
             if lag >= self.timing.delta_time:
                 return self._drop("late")
+            if lag and lag >= self.timing.delta_time - 1 and self.state is LinkState.UP:
+                self._refresh_wanted = True  # close to the limit: re-anchor before drift drops us
         else:  # the peer runs ahead of our estimate (its clock is a little faster): follow it
             self._anchor_tc, self._anchor_cycle = rsd.tc, self.local_cycle
         self._last_tc, self._last_t = rsd.tc, (t1, t2)
@@ -212,6 +240,7 @@ class Endpoint:
         previous = self.state
         self.state = LinkState.DOWN
         self._missed_cycles = 0
+        self._refresh_wanted = False
         if previous is LinkState.SYNCING:
             # an SSR was taken but no RSD verified against it (wrong SID/DATAVER, or lost again)
             self.stats["sync_failed"] += 1
@@ -247,9 +276,13 @@ class Endpoint:
             ini = checkword.seqini(enq, self.local.sid, self.local.dataver, self._t)
             frames.append(encode_ssr(src, dst, self.tc, tc_e, ini, category=self.category))
             self.stats["tx_ssr"] += 1
-        if self.state is LinkState.DOWN and (
+        refresh = self._refresh_wanted and self.state is LinkState.UP
+        if (self.state is LinkState.DOWN or refresh) and (
             self._sse_tc_e is None or self.local_cycle - self._sse_cycle >= self.timing.life_time
         ):
+            if refresh:
+                self._refresh_wanted = False
+                self.stats["tx_sse_refresh"] += 1
             self._sse_tc_e = self.tc
             self._sse_seqenq = checkword.seqenq(self.local.sid, self._t)
             self._sse_cycle = self.local_cycle

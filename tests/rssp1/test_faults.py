@@ -326,3 +326,39 @@ def test_wrong_sid_cannot_cancel_for_any_allowed_gap():
             mk = lfsr.power_map(k)
             solved = solve_gf2([(1 << i) ^ mk(1 << i) for i in range(32)], 0)
             assert solved is not None and solved[1] == [], k
+
+
+@pytest.mark.parametrize("slow_side", ["sender", "receiver"])
+def test_clock_drift_never_drops_the_link(slow_side):
+    """One end's clock runs 2 % slow (it misses every 50th cycle: 200 times a crystal's 100 ppm).
+    The receiver's estimate of the sender's TC is re-anchored by refresh SSE/SSR while the link stays up."""
+    pair = LinkPair(FIELD)
+    pair.bring_up()
+    delivered = 0
+    sent_before = pair.a.stats["tx_rsd"]
+    for n in range(3000):
+        skip = n % 50 == 49
+        fa = [] if (skip and slow_side == "sender") else pair.a.cycle(b"x%d" % n)[0]
+        fb = [] if (skip and slow_side == "receiver") else pair.b.cycle(b"ack")[0]
+        for f in fa:
+            delivered += len(received(pair.b.receive(f)))
+        for f in fb:
+            pair.a.receive(f)
+    assert pair.b.stats["link_down"] == 0 and pair.a.stats["link_down"] == 0
+    assert pair.b.stats["dropped_late"] == 0
+    assert delivered == pair.a.stats["tx_rsd"] - sent_before >= 2940  # every frame sent got through
+    if slow_side == "sender":
+        assert pair.b.stats["ssr_refresh"] >= 20 and pair.b.stats["tx_sse_refresh"] == pair.b.stats["ssr_refresh"]
+
+
+def test_refresh_ssr_that_breaks_the_timestamp_chain_is_refused():
+    pair = LinkPair(FIELD)
+    pair.bring_up()
+    pair.b._refresh_wanted = True
+    sse = [f for f in pair.b.cycle(b"ack")[0] if f[1] == 0x90]
+    assert len(sse) == 1 and pair.b.stats["tx_sse_refresh"] == 1
+    from rssp1.frames import decode_frame as _decode
+
+    tc_e = _decode(sse[0]).tc_e
+    forged = encode_ssr(CENTRE.address, RBC.address, pair.a.tc, tc_e, (0x1234, 0x5678))
+    assert pair.b.receive(forged) and pair.b.stats["dropped_ssr_inconsistent"] == 1 and pair.b.is_up
