@@ -72,7 +72,7 @@ def test_thousand_receivers_one_layout():
     args = batch_inputs(rng, "G", 1000, 12, 2, 0.0)
     batch = encode_msm_batch("G", 7, *args)
     assert len(batch) == 1000 and len(set(np.diff(batch.offsets))) == 1
-    for i in (0, 499, 999):
+    for i in (0, 499, 511, 512, 999):
         assert batch[i] == single("G", 7, *args, i)
         assert crc24q(batch[i]) == 0
 
@@ -101,3 +101,16 @@ def test_vectorised_crc_equals_table_crc(rows):
 @given(st.binary(max_size=1029))
 def test_crc24q_numpy_path_equals_byte_loop(data):
     assert crc24q(data) == crc24q_bytewise(data)
+
+
+def test_blocks_join_seamlessly(monkeypatch):
+    # Receivers are encoded in cache-sized blocks; block edges must not show in the output.
+    import augnet.gnss.rtcm.batch as batch_mod
+
+    monkeypatch.setattr(batch_mod, "RECEIVERS_PER_BLOCK", 7)
+    rng = np.random.default_rng(14)
+    args = batch_inputs(rng, "E", 40, 9, 3, 0.1)
+    batch = encode_msm_batch("E", 7, *args, multiple=1)
+    assert len(batch) == 40
+    for i in range(40):
+        assert batch[i] == single("E", 7, *args, i, multiple=1), f"receiver {i}"
