@@ -56,6 +56,7 @@ def test_msm_against_pyrtcm(msg_type, data):
     assert isinstance(back, MsmMessage)
     assert back.to_fields() == msg.to_fields()
     assert encode(back) == raw[3:-3]
+    assert encode(RtcmMessage(msg_type, msg.to_fields())) == raw[3:-3]  # pyrtcm-style values in
 
 
 def test_1005_known_station():

@@ -17,7 +17,8 @@ Which function to call:
 (c) encode a message::
 
         payload = encode(msg); raw = encode_frame(msg)      # or frame(payload)
-        RtcmMessage(1005, {"DF003": 7, "DF025": x, ...})    # fixed layouts take pyrtcm's field names
+        RtcmMessage(1005, {"DF003": 7, "DF025": x, ...})    # pyrtcm's field names and scaled values
+        RtcmMessage(1077, msm.to_fields())                  # MSM too (or an MsmMessage of raw arrays)
 
 (d) MSM <-> observables (pseudorange m, phase cycles, Doppler Hz, CNR dB-Hz, lock ms; NaN = absent)::
 
@@ -50,7 +51,7 @@ from augnet.gnss.rtcm.codec import (
 from augnet.gnss.rtcm.errors import DecodeError, EncodeError
 from augnet.gnss.rtcm.framing import Frame, RtcmStreamReader, StreamStats, crc24q, frame, iter_frames, read_frames
 from augnet.gnss.rtcm.layouts import SUPPORTED_TYPES
-from augnet.gnss.rtcm.msm import MsmMessage, decode_msm, encode_msm, make_msm
+from augnet.gnss.rtcm.msm import MsmMessage, decode_msm, encode_msm, make_msm, msm_from_fields
 from augnet.gnss.rtcm.observables import (
     Observables,
     lock_indicator_df402,
@@ -67,6 +68,6 @@ __all__ = [
     "RtcmMessage", "RtcmStreamReader", "SUPPORTED_TYPES", "StreamStats", "UnknownMessage", "crc24q",
     "decode", "decode_msm", "encode", "encode_frame", "encode_msm", "encode_msm_batch", "frame",
     "iter_frames", "lock_indicator_df402", "lock_indicator_df407", "lock_time_df402", "lock_time_df407",
-    "make_msm", "msm_to_observables", "observables_to_msm", "observables_to_msm_list", "read_frames",
+    "make_msm", "msm_from_fields", "msm_to_observables", "observables_to_msm", "observables_to_msm_list", "read_frames",
     "text_fields",
 ]

@@ -14,7 +14,7 @@ from augnet.gnss.rtcm.errors import DecodeError, EncodeError
 from augnet.gnss.rtcm.fields import FIELDS, Kind, decode_raw, encode_raw, from_value, to_value
 from augnet.gnss.rtcm.framing import Frame, RtcmStreamReader, frame, message_type
 from augnet.gnss.rtcm.layouts import LAYOUTS, Repeat, msm_kind
-from augnet.gnss.rtcm.msm import MsmMessage, decode_msm, encode_msm
+from augnet.gnss.rtcm.msm import MsmMessage, decode_msm, encode_msm, msm_from_fields
 
 
 @dataclass
@@ -146,6 +146,8 @@ def decode(data: bytes | Frame) -> Message:
 def encode(msg: Message) -> bytes:
     """The payload of a message (no frame)."""
     if isinstance(msg, RtcmMessage):
+        if msm_kind(msg.msg_type) is not None:  # an MSM given as pyrtcm-style fields
+            return encode_msm(msm_from_fields({"DF002": msg.msg_type, **msg.fields}))
         return encode_fixed(msg)
     if isinstance(msg, MsmMessage):
         return encode_msm(msg)

@@ -206,6 +206,8 @@ def _build_layout(msg_type: int, sat_mask: int, sig_mask: int, cell_bits: int) -
                 signed.append(f.kind.value == "i")
                 pos += f.width
             slices.append((role, first, len(starts)))
+    for shared in (sat_ids, sig_ids, cell_mask):  # handed to every message decoded with this layout
+        shared.setflags(write=False)
     st = np.array(starts, dtype=np.int64)
     w = np.array(widths, dtype=np.int64)
     return _Layout(
@@ -355,6 +357,45 @@ def encode_msm(msg: MsmMessage) -> bytes:
         # arithmetic shift of int64 gives the two's complement bits of negative values
         bits.append(((arr.astype(np.int64)[:, None] >> _BIT_SHIFTS[FIELDS[df].width]) & 1).astype(np.uint8).ravel())
     return np.packbits(np.concatenate(bits)).tobytes()
+
+
+def msm_from_fields(fields: dict[str, object]) -> MsmMessage:
+    """The inverse of ``MsmMessage.to_fields``: pyrtcm-style values (scaled, ``DF405_01`` ...) -> message.
+
+    Derived pyrtcm attributes (PRN_xx, CELLPRN_xx, NSat ...) are ignored if present.
+    """
+    from augnet.gnss.rtcm.fields import from_value
+
+    try:
+        mt = int(fields["DF002"])  # type: ignore[arg-type]
+        kind = msm_kind(mt)
+        if kind is None:
+            raise EncodeError(f"{mt} is not a supported MSM type")
+        system, level = kind
+        names = MSM_EPOCH_FIELDS[system]
+        epoch = int(fields[names[0]]) if len(names) == 1 else (int(fields[names[0]]) << 27) | int(fields[names[1]])
+        sat_ids = _mask_ids(int(fields["DF394"]), 64)
+        sig_ids = _mask_ids(int(fields["DF395"]), 32)
+        nsat, nsig = len(sat_ids), len(sig_ids)
+        cell_bits = int(fields["DF396"])
+        cell_mask = np.array([(cell_bits >> (nsat * nsig - 1 - i)) & 1 for i in range(nsat * nsig)],
+                             dtype=bool).reshape(nsat, nsig)
+        ncell = int(cell_mask.sum())
+        roles = {}
+        for group, count in ((sat_fields(system, level), nsat), (cell_fields(level), ncell)):
+            for role, df in group:
+                f = FIELDS[df]
+                roles[role] = np.array([from_value(f, fields[f"{df}_{i + 1:02d}"]) for i in range(count)],
+                                       dtype=np.int64)
+        return MsmMessage(
+            msg_type=mt, station_id=int(fields["DF003"]), epoch=epoch, sat_ids=sat_ids, sig_ids=sig_ids,
+            cell_mask=cell_mask, multiple=int(fields.get("DF393", 0)), iods=int(fields.get("DF409", 0)),
+            reserved=int(fields.get("DF001_7", 0)), clock_steering=int(fields.get("DF411", 0)),
+            external_clock=int(fields.get("DF412", 0)), smoothing=int(fields.get("DF417", 0)),
+            smoothing_interval=int(fields.get("DF418", 0)), **roles,
+        )
+    except KeyError as err:
+        raise EncodeError(f"MSM field {err} missing") from None
 
 
 def make_msm(system: str, level: int, **kwargs) -> MsmMessage:
