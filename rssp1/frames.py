@@ -154,7 +154,7 @@ def encode_frame(frame: Frame) -> bytes:
 
 
 def check_crc16(frame: bytes | memoryview) -> bool:
-    """True when the frame's last two bytes are the CRC16 of the rest."""
+    """True when the frame's last two bytes are the CRC16 of the rest (the explicit comparison)."""
     if len(frame) < CRC16_BYTES + 1:
         return False
     return crc16(frame[:-CRC16_BYTES]) == CRC16_FIELD.unpack_from(frame, len(frame) - CRC16_BYTES)[0]
@@ -202,7 +202,10 @@ def decode_frame(frame: bytes | bytearray | memoryview) -> Frame:
     else:
         raise FrameError("type", f"message type {msg_type:#04x}")
     body_end = n - CRC16_BYTES
-    if crc16(frame[:body_end]) != CRC16_FIELD.unpack_from(frame, body_end)[0]:
+    # A reflected CRC with init 0 and no final XOR, stored low byte first, leaves a zero residue when
+    # run over the frame including its CRC: one pass, no slice (tests check it equals the
+    # compare-with-stored-field form on every captured frame).
+    if crc16(frame) != 0:
         raise FrameError("crc16")
     if msg_type in RSD_TYPES:
         return Rsd(category, msg_type, source, destination, tc, (svc1, svc2), bytes(frame[RSD_PREFIX.size : body_end]))

@@ -90,6 +90,8 @@ class TimestampLfsr:
         """T(n + cycles) given T(n)."""
         if cycles < 0:
             raise ValueError("the timestamp LFSR only runs forward")
+        if cycles == 1:  # the common case: consecutive frames
+            return self.cycle(value)
         if cycles <= self._DIRECT_STEP_LIMIT:
             step = self.cycle
             for _ in range(cycles):

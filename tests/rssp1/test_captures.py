@@ -43,6 +43,21 @@ def test_every_rsd_passes_crc16_and_0029_passes_both_check_words(captures):
     assert wrong.sources[0x29].svc_passed == 0 and wrong.sources[0x29].svc_failed == 221
 
 
+def test_crc16_residue_check_agrees_with_the_stored_field(captures):
+    from rssp1.crc import crc16
+    from rssp1.frames import check_crc16
+
+    n = 0
+    for path in captures:
+        for d in udp_datagrams(path):
+            if d.dst_port in (50000, 50001):
+                assert check_crc16(d.payload) and crc16(d.payload) == 0
+                bad = bytes([d.payload[0] ^ 4]) + d.payload[1:]
+                assert not check_crc16(bad) and crc16(bad) != 0
+                n += 1
+    assert n == RSD_FRAMES_IN_CAPTURES
+
+
 def test_sids_recovered_from_two_frames_verify_every_frame(captures):
     report = inspect_captures(captures, recover=True)
     assert report.sources[0x29].sid == SID_0029
