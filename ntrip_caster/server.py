@@ -120,7 +120,8 @@ class ClientSession:
 class Mountpoint:
     __slots__ = ("name", "kind", "cfg", "v1", "v2", "source", "aligner", "factory", "bytes_in",
                  "frames_in", "bytes_out", "clients_total", "drops", "source_sessions",
-                 "created_at", "caster", "record", "auto", "fanout_last_ms", "fanout_max_ms")
+                 "created_at", "caster", "record", "auto", "fanout_last_ms", "fanout_max_ms",
+                 "n_clients")
 
     def __init__(self, caster: "Caster", cfg: MountConfig, factory: StreamFactory | None = None) -> None:
         self.caster = caster
@@ -143,6 +144,7 @@ class Mountpoint:
         self.auto = False  # created by a source for a name not in the config
         self.fanout_last_ms = 0.0  # time one publish took to hand a piece to every client
         self.fanout_max_ms = 0.0
+        self.n_clients = 0  # clients connected to this mountpoint (for nearest: not per base)
 
     @property
     def live(self) -> bool:
@@ -189,8 +191,7 @@ class Mountpoint:
         src = self.source
         return {
             "name": self.name, "kind": self.kind, "live": self.live,
-            "clients": len(self.v1) + len(self.v2) if self.kind == "source" else
-            sum(1 for c in self.caster.clients.values() if c.mount is self),
+            "clients": self.n_clients, "subscribers": len(self.v1) + len(self.v2),
             "clients_total": self.clients_total, "bytes_in": self.bytes_in,
             "frames_in": self.frames_in, "bytes_out": self.bytes_out, "drops": dict(self.drops),
             "source": None if src is None else {
@@ -494,8 +495,7 @@ class Caster:
     def _admit_client(self, proto: CasterProtocol, req: NtripRequest, mount: Mountpoint,
                       user: str | None) -> None:
         lim = self.limits
-        mount_clients = (len(mount.v1) + len(mount.v2)) if mount.kind == "source" else \
-            sum(1 for c in self.clients.values() if c.mount is mount)
+        mount_clients = mount.n_clients
         if len(self.clients) >= lim.max_clients:
             proto.reject(503, "caster full")
             return
@@ -517,6 +517,7 @@ class Caster:
         self.clients[s.id] = s
         self.per_ip[s.ip] += 1
         mount.clients_total += 1
+        mount.n_clients += 1
         proto.transport.write(stream_ok(req.version))
         if mount.kind == "source":
             mount.subscribe(s)
@@ -638,6 +639,7 @@ class Caster:
         if s.closed:
             return
         s.closed = True
+        s.mount.n_clients -= 1
         self.clients.pop(s.id, None)
         self.per_ip[s.ip] -= 1
         if self.per_ip[s.ip] <= 0:
