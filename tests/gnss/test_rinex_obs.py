@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from augnet.gnss import time as gt
 from augnet.gnss.rinex.obs import ObsHeader, empty_obs, read_obs, write_obs
@@ -170,3 +172,25 @@ def test_rinex2_converted_to_rinex3_types_and_written(shared_data, tmp_path):
     back = read_obs(out)
     assert back.header.version == 3.04
     _assert_same(v3, back)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.floats(min_value=-999_999_999.999, max_value=9_999_999_999.999, allow_nan=False), min_size=1, max_size=50))
+def test_vectorised_f14_3_equals_printf(values):
+    from augnet.gnss.rinex.obs import _f14_3
+
+    v = np.array(values)
+    ours = [row.tobytes().decode() for row in _f14_3(v).reshape(len(v), 14)]
+    for x, text in zip(values, ours):
+        expected = f"{x:14.3f}"
+        if expected.strip() == "-0.000":  # printf keeps the sign of a value that rounds to zero
+            expected = f"{0.0:14.3f}"
+        assert text == expected
+
+
+def test_writer_rejects_values_f14_3_cannot_hold(tmp_path):
+    header = ObsHeader(obs_types={"G": ["L1C"]})
+    d = empty_obs(header, [gt.from_calendar(2026, 1, 1)], ["G01"])
+    d.obs["L1C"][0, 0] = -1_000_000_000.0  # 15 characters with the sign
+    with pytest.raises(ValueError, match="G01 L1C"):
+        write_obs(tmp_path / "x.rnx", d)
