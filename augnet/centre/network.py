@@ -1,0 +1,204 @@
+"""The reference-station network: baselines, closure checks, and DD residuals relative to a master.
+
+Baselines join each station to its nearest neighbours (plus a minimum spanning tree, so the network is
+connected). Each baseline resolves its own ambiguities (`baseline.py`); the network then
+
+- checks closure around every triangle of baselines (the DD integers of a-b, b-c and a-c must add up, per
+  satellite and frequency; a misclosure means one of them is wrong, and the satellite is dropped on the
+  triangle's baselines for that epoch);
+- chains baseline residuals along the shortest path from the master station to every station, after
+  re-referencing them to one reference satellite per system, giving DD residuals (dispersive and
+  non-dispersive) of every station against the master: the input of the interpolation.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from augnet.centre.baseline import BaselineConfig, BaselineEpoch, BaselineSolver
+from augnet.centre.observations import StationEpoch
+from augnet.gnss.ephemeris import NavigationData
+from augnet.gnss.geometry import ecef_to_enu
+
+NEIGHBOURS_PER_STATION = 2
+
+
+def choose_baselines(names: list[str], xyz: np.ndarray, k: int = NEIGHBOURS_PER_STATION) -> list[tuple[int, int]]:
+    """Edges (i, j), i < j: every station to its k nearest, plus a minimum spanning tree."""
+    n = len(names)
+    d = np.linalg.norm(xyz[:, None, :] - xyz[None, :, :], axis=2)
+    edges = set()
+    for i in range(n):
+        for j in np.argsort(d[i])[1:k + 1]:
+            edges.add((min(i, int(j)), max(i, int(j))))
+    # Prim's minimum spanning tree guarantees connectivity
+    seen = {0}
+    heap = [(d[0, j], 0, j) for j in range(1, n)]
+    heapq.heapify(heap)
+    while heap and len(seen) < n:
+        _, i, j = heapq.heappop(heap)
+        if j in seen:
+            continue
+        seen.add(j)
+        edges.add((min(i, j), max(i, j)))
+        for m in range(n):
+            if m not in seen:
+                heapq.heappush(heap, (d[j, m], j, m))
+    return sorted(edges)
+
+
+def triangles(edges: list[tuple[int, int]]) -> list[tuple[int, int, int]]:
+    es = set(edges)
+    nodes = sorted({i for e in edges for i in e})
+    return [t for t in itertools.combinations(nodes, 3)
+            if (t[0], t[1]) in es and (t[1], t[2]) in es and (t[0], t[2]) in es]
+
+
+@dataclass
+class NetworkEpoch:
+    t_gpst: float
+    master: str
+    stations: list[str]  # row order of the residual matrices; the master first
+    station_en_m: np.ndarray  # (n, 2) east/north of each station from the master [m]
+    station_xyz_m: np.ndarray  # (n, 3)
+    refs: dict[str, str]  # network reference satellite per system
+    sats: np.ndarray  # (S,) columns of the residual matrices
+    dd_iono_m: np.ndarray  # (n, S) DD ionosphere on f1 of station minus master, sat minus ref; NaN unknown
+    dd_trop_m: np.ndarray  # (n, S) DD non-dispersive residual beyond the model
+    baselines: dict[str, BaselineEpoch | None]
+    misclosures: int = 0
+    present: list[str] = field(default_factory=list)  # stations with data this epoch
+
+    def fixed_fraction(self) -> dict[str, float]:
+        return {k: (b.fixed_fraction if b is not None else 0.0) for k, b in self.baselines.items()}
+
+
+class NetworkSolver:
+    def __init__(self, stations: dict[str, np.ndarray], master: str | None = None,
+                 config: BaselineConfig | None = None, edges: list[tuple[str, str]] | None = None):
+        self.names = list(stations)
+        self.xyz = np.array([np.asarray(stations[n], float) for n in self.names])
+        self.master = master if master is not None else self._central_station()
+        if edges is None:
+            idx_edges = choose_baselines(self.names, self.xyz)
+        else:
+            pos = {n: i for i, n in enumerate(self.names)}
+            idx_edges = sorted((min(pos[a], pos[b]), max(pos[a], pos[b])) for a, b in edges)
+        self.edges = idx_edges
+        self.triangles = triangles(idx_edges)
+        self.solvers = {(i, j): BaselineSolver(self.names[i], self.xyz[i], self.names[j], self.xyz[j], config)
+                        for i, j in idx_edges}
+        m = self.names.index(self.master)
+        self.order = [m] + [i for i in range(len(self.names)) if i != m]
+        self.en = ecef_to_enu(self.xyz - self.xyz[m], self.xyz[m])[:, :2]
+
+    def _central_station(self) -> str:
+        c = self.xyz.mean(axis=0)
+        return self.names[int(np.argmin(np.linalg.norm(self.xyz - c, axis=1)))]
+
+    def update(self, epochs: dict[str, StationEpoch], nav: NavigationData) -> NetworkEpoch:
+        present = {n for n, e in epochs.items() if e is not None and len(e.sats)}
+        results: dict[tuple[int, int], BaselineEpoch | None] = {}
+        t = next(iter(epochs[n].t_gpst for n in present)) if present else float("nan")
+        for (i, j), solver in self.solvers.items():
+            a, b = self.names[i], self.names[j]
+            results[(i, j)] = solver.update(epochs[a], epochs[b], nav) if a in present and b in present else None
+        misclosures = self._check_closures(results)
+        refs = self._network_refs(results)
+        sats = np.array(sorted({str(s) for r in results.values() if r is not None for s in r.sats}))
+        n = len(self.names)
+        iono = np.full((n, len(sats)), np.nan)
+        trop = np.full((n, len(sats)), np.nan)
+        col = {s: k for k, s in enumerate(sats)}
+        per_edge = {e: self._rereferenced(r, refs, col, len(sats)) for e, r in results.items()}
+        m = self.order[0]
+        iono[m] = 0.0
+        trop[m] = 0.0
+        # shortest paths (in metres) from the master over baselines that produced residuals
+        dist = {m: 0.0}
+        heap = [(0.0, m)]
+        while heap:
+            d0, i = heapq.heappop(heap)
+            if d0 > dist.get(i, np.inf):
+                continue
+            for (a, b), vals in per_edge.items():
+                if vals is None or i not in (a, b):
+                    continue
+                j = b if i == a else a
+                sign = 1.0 if i == a else -1.0  # residuals are b minus a
+                nd = d0 + self.solvers[(a, b)].length_m
+                if nd < dist.get(j, np.inf):
+                    dist[j] = nd
+                    iono[j] = iono[i] + sign * vals[0]
+                    trop[j] = trop[i] + sign * vals[1]
+                    heapq.heappush(heap, (nd, j))
+        rows = self.order
+        return NetworkEpoch(
+            t_gpst=t, master=self.master, stations=[self.names[i] for i in rows], station_en_m=self.en[rows],
+            station_xyz_m=self.xyz[rows], refs=refs, sats=sats, dd_iono_m=iono[rows], dd_trop_m=trop[rows],
+            baselines={self.solvers[e].name: r for e, r in results.items()}, misclosures=misclosures,
+            present=sorted(present))
+
+    def _network_refs(self, results) -> dict[str, str]:
+        """Per system, the satellite fixed on the most baselines (ties: the first baseline's reference)."""
+        votes: dict[str, dict[str, int]] = {}
+        for r in results.values():
+            if r is None:
+                continue
+            for k, s in enumerate(r.sats):
+                if r.fixed[k]:
+                    votes.setdefault(s[0], {}).setdefault(str(s), 0)
+                    votes[s[0]][str(s)] += 1
+        return {sys_: max(v.items(), key=lambda kv: (kv[1], kv[0]))[0] for sys_, v in votes.items()}
+
+    @staticmethod
+    def _rereferenced(r: BaselineEpoch | None, refs: dict[str, str], col: dict[str, int], n: int):
+        """A baseline's DD residuals against the network's references, as (iono, trop) rows."""
+        if r is None:
+            return None
+        iono = np.full(n, np.nan)
+        trop = np.full(n, np.nan)
+        pos = {str(s): k for k, s in enumerate(r.sats)}
+        for system, ref in refs.items():
+            kr = pos.get(ref)
+            if kr is None or not r.fixed[kr]:
+                continue
+            for k, s in enumerate(r.sats):
+                if s[0] != system or not r.fixed[k]:
+                    continue
+                iono[col[str(s)]] = r.dd_iono_m[k] - r.dd_iono_m[kr]
+                trop[col[str(s)]] = r.dd_trop_m[k] - r.dd_trop_m[kr]
+        return iono, trop
+
+    def _check_closures(self, results) -> int:
+        """Integer closure around each triangle; on a misclosure, the satellite's residuals are voided on the
+        triangle's baselines for this epoch. Returns the number of misclosures."""
+        bad = 0
+        for i, j, k in self.triangles:
+            rij, rjk, rik = results.get((i, j)), results.get((j, k)), results.get((i, k))
+            if rij is None or rjk is None or rik is None:
+                continue
+            common = set(map(str, rij.sats)) & set(map(str, rjk.sats)) & set(map(str, rik.sats))
+            for system in {s[0] for s in common}:
+                ref_sets = {rij.refs.get(system), rjk.refs.get(system), rik.refs.get(system)}
+                if len(ref_sets) != 1:
+                    continue  # different references: checked once they agree
+                for s in (x for x in common if x[0] == system):
+                    vals = []
+                    for r in (rij, rjk, rik):
+                        q = int(np.flatnonzero(r.sats == s)[0])
+                        vals.append((r.fixed[q], r.dd_n[q], r, q))
+                    if not all(v[0] for v in vals):
+                        continue
+                    mis = vals[0][1] + vals[1][1] - vals[2][1]
+                    if np.any(mis != 0):
+                        bad += 1
+                        for _, _, r, q in vals:
+                            r.fixed[q] = False
+                            r.dd_iono_m[q] = np.nan
+                            r.dd_trop_m[q] = np.nan
+        return bad
