@@ -214,5 +214,13 @@ class SealedEndpoint:
         return self.endpoint.is_up
 
     @property
+    def timing(self):
+        return self.endpoint.timing
+
+    @property
+    def state(self):
+        return self.endpoint.state
+
+    @property
     def stats(self):
         return self.endpoint.stats

@@ -186,7 +186,7 @@ class RbcSimulator:
         report_timeout_cycles: int | None = None,
     ) -> None:
         self.endpoint = endpoint
-        timing = endpoint.endpoint.timing if hasattr(endpoint, "endpoint") else endpoint.timing
+        timing = endpoint.timing
         self.cycle_s = timing.cycle_s
         self.max_correction_age_ms = _ms(max_correction_age_s)
         self.report_timeout_cycles = report_timeout_cycles or timing.delay_time

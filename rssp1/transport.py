@@ -7,8 +7,11 @@ The transport owns the socket and the main-cycle clock and nothing else.
 - The cycle loop keeps deadlines on a fixed grid (t0 + k * cycle), so the cycle does not drift with
   scheduling jitter; a cycle that starts more than one cycle late is counted as an overrun and run
   once (a safety protocol must not catch up with a burst of cycles: TC would run ahead of time).
-- UDP: one RSSP-I frame per datagram, as in the field captures (ports 50000/50001). Datagrams from
-  hosts other than the configured peer are counted and dropped before the protocol sees them.
+- UDP: one RSSP-I frame per datagram, as in the field captures (ports 50000/50001). With `redundant`
+  addresses every frame also goes out on the second network, as the captured devices do (the same
+  frames from two sources on two ports); the receiver keeps the first copy and drops the other as a
+  repeat. Datagrams from hosts other than the configured peers are counted and dropped before the
+  protocol sees them.
 - TCP: RSSP-I itself is datagram-shaped; on a stream each frame is preceded by its length as a u16,
   little-endian like RSSP-I (our choice; the field captures we have are UDP only). RSSP-I frames are
   also self-delimiting (type + SDS), but a length prefix lets a receiver skip a frame that fails its
@@ -136,10 +139,12 @@ class UdpLink(_CycleLoop, asyncio.DatagramProtocol):
     """A node on a UDP socket, cycling every `cycle_s`."""
 
     def __init__(self, node: Node, cycle_s: float, remote: tuple[str, int], *,
-                 accept_from: set[str] | None = None, clock: Callable[[], float] = time.monotonic) -> None:
+                 redundant: list[tuple[str, int]] = (), accept_from: set[str] | None = None,  # type: ignore[assignment]
+                 clock: Callable[[], float] = time.monotonic) -> None:
         super().__init__(node, cycle_s, clock)
         self.remote = remote
-        self.accept_from = accept_from if accept_from is not None else {remote[0]}
+        self.redundant = list(redundant)
+        self.accept_from = accept_from if accept_from is not None else {remote[0], *(r[0] for r in self.redundant)}
         self.transport: asyncio.DatagramTransport | None = None
 
     @classmethod
@@ -168,8 +173,9 @@ class UdpLink(_CycleLoop, asyncio.DatagramProtocol):
 
     def _send(self, frame: bytes) -> None:
         if self.transport is not None:
-            self.transport.sendto(frame, self.remote)
-            self.stats["tx"] += 1
+            for remote in (self.remote, *self.redundant):
+                self.transport.sendto(frame, remote)
+                self.stats["tx"] += 1
 
     async def run(self, cycles: int | None = None) -> None:
         await self._run(self._send, cycles)

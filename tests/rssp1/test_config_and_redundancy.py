@@ -82,3 +82,33 @@ def test_udp_link_drops_datagrams_from_strangers():
             link.close()
 
     asyncio.run(scenario())
+
+
+@pytest.mark.timeout(30)
+def test_udp_dual_network_copies_are_taken_once():
+    async def scenario():
+        timing = LinkTiming(cycle_s=0.05)
+        got = []
+        rbc_ep, centre_ep = Endpoint(RBC, CENTRE, timing), Endpoint(CENTRE, RBC, timing)
+        rbc = await UdpLink.open(EndpointNode(rbc_ep, on_event=lambda e, t: got.append(e)), 0.05,
+                                 ("127.0.0.1", 0), ("127.0.0.1", 9))
+        centre = await UdpLink.open(EndpointNode(centre_ep, payload=lambda: b"status"), 0.05, ("127.0.0.1", 0),
+                                    rbc.local_address, redundant=[rbc.local_address])
+        rbc.remote = centre.local_address
+        tasks = [asyncio.create_task(rbc.run()), asyncio.create_task(centre.run(cycles=30))]
+        try:
+            await tasks[1]
+            await asyncio.sleep(0.1)
+        finally:
+            rbc.close()
+            centre.close()
+            for t in tasks:
+                t.cancel()
+            await asyncio.gather(*tasks, return_exceptions=True)
+        data = [e.data for e in got if type(e).__name__ == "DataReceived"]
+        assert len(data) >= 20 and rbc_ep.stats["rx_rsd_ok"] == len(data)
+        # every accepted frame's twin was dropped as a repeat (the first copies during sync excepted)
+        assert rbc_ep.stats["dropped_repeat"] >= len(data)
+        assert centre.stats["tx"] == 2 * (centre_ep.stats["tx_rsd"] + centre_ep.stats["tx_sse"] + centre_ep.stats["tx_ssr"])
+
+    asyncio.run(scenario())
