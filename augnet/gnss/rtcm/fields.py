@@ -30,20 +30,18 @@ class Field:
     kind: Kind
     scale: float | int | None  # value = raw * scale; None means the raw integer is the value
     what: str
+    raw_min: int = 0  # smallest raw integer the field holds (set from width and kind)
+    raw_max: int = 0  # largest
 
-    @property
-    def raw_min(self) -> int:
-        if self.kind is Kind.TWOS:
-            return -(1 << (self.width - 1))
-        if self.kind is Kind.SIGN_MAG:
-            return -((1 << (self.width - 1)) - 1)
-        return 0
 
-    @property
-    def raw_max(self) -> int:
-        if self.kind in (Kind.TWOS, Kind.SIGN_MAG):
-            return (1 << (self.width - 1)) - 1
-        return (1 << self.width) - 1
+def _field(name: str, width: int, kind: Kind, scale, what: str) -> Field:
+    if kind is Kind.TWOS:
+        lo, hi = -(1 << (width - 1)), (1 << (width - 1)) - 1
+    elif kind is Kind.SIGN_MAG:
+        lo, hi = -((1 << (width - 1)) - 1), (1 << (width - 1)) - 1
+    else:
+        lo, hi = 0, (1 << width) - 1
+    return Field(name, width, kind, scale, what, lo, hi)
 
 
 U, I, S, C = Kind.UNSIGNED, Kind.TWOS, Kind.SIGN_MAG, Kind.CHAR
@@ -212,7 +210,7 @@ _DECLARED: tuple[tuple[str, int, Kind, float | int | None, str], ...] = (
     ("DF408", 10, U, P2[-4], "CNR, extended resolution [dB-Hz] (0 = not computed)"),
 )
 
-FIELDS: dict[str, Field] = {name: Field(name, w, k, s, what) for name, w, k, s, what in _DECLARED}
+FIELDS: dict[str, Field] = {name: _field(name, w, k, s, what) for name, w, k, s, what in _DECLARED}
 
 
 def decode_raw(field: Field, raw: int) -> int:

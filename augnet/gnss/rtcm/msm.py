@@ -282,18 +282,20 @@ def decode_msm(payload: bytes) -> MsmMessage:
 # Encoding (one message; plain bit writer)
 
 
-def check_msm(msg: MsmMessage) -> None:
-    """Raise ``EncodeError`` unless the message's arrays are consistent and every value fits."""
+def check_msm(msg: MsmMessage) -> tuple[np.ndarray, np.ndarray]:
+    """Raise ``EncodeError`` unless the message's arrays are consistent and every value fits.
+
+    Returns the body's field values in transmission order and their widths (see ``_body_values``).
+    """
     sat = np.asarray(msg.sat_ids)
     sig = np.asarray(msg.sig_ids)
     if sat.ndim != 1 or sig.ndim != 1:
         raise EncodeError("satellite and signal ids must be 1-d arrays")
     # An empty MSM (no satellite or no signal) is legal: receivers send one for a system they track
     # nothing of, e.g. to close a multiple-message epoch.
-    if len(sat) and (np.any(np.diff(sat) <= 0) or sat[0] < 1 or sat[-1] > 64):
-        raise EncodeError(f"satellite ids must be ascending, unique and in 1..64: {sat.tolist()}")
-    if len(sig) and (np.any(np.diff(sig) <= 0) or sig[0] < 1 or sig[-1] > 32):
-        raise EncodeError(f"signal ids must be ascending, unique and in 1..32: {sig.tolist()}")
+    for ids, top, what in ((sat.tolist(), 64, "satellite"), (sig.tolist(), 32, "signal")):
+        if ids and not (ids[0] >= 1 and ids[-1] <= top and all(a < b for a, b in zip(ids, ids[1:]))):
+            raise EncodeError(f"{what} ids must be ascending, unique and in 1..{top}: {ids}")
     if len(sat) * len(sig) > MSM_MAX_CELLS:
         raise EncodeError(
             f"{len(sat)} satellites x {len(sig)} signals = {len(sat) * len(sig)} cells exceed the "
@@ -311,37 +313,50 @@ def check_msm(msg: MsmMessage) -> None:
             raise EncodeError(f"{df} ({f.what}) = {v} outside [{f.raw_min}, {f.raw_max}]")
     if not 0 <= msg.epoch < (1 << 30):
         raise EncodeError(f"MSM epoch field {msg.epoch} does not fit 30 bits")
-    for role, df, arr, count in _body(msg, len(sat), ncell):
-        if arr is None:
-            if role == "ext_info":
-                continue  # reserved: zeros
-            raise EncodeError(f"MSM{msg.level} needs {role} ({df})")
-        if arr.shape != (count,):
-            raise EncodeError(f"{role} ({df}) has shape {arr.shape}, expected ({count},)")
-        f = FIELDS[df]
-        if count and (arr.min() < f.raw_min or arr.max() > f.raw_max):
-            raise EncodeError(f"{role} ({df}, {f.what}) outside [{f.raw_min}, {f.raw_max}]")
+    return _body_values(msg, len(sat), ncell)  # raises on a missing, misshapen or out-of-range field
 
 
-def _body(msg: MsmMessage, nsat: int, ncell: int):
-    """(role, DF, array or None, expected length) of the satellite then cell fields, in order."""
+_SHIFTS_32 = np.arange(31, -1, -1, dtype=np.int64)  # MSM body fields are at most 24 bits wide
+
+
+def _body_values(msg: MsmMessage, nsat: int, ncell: int) -> tuple[np.ndarray, np.ndarray]:
+    """All satellite then cell field values in transmission order, and each one's width."""
+    arrays, widths, los, his, counts, names = [], [], [], [], [], []
     for group, count in ((sat_fields(msg.system, msg.level), nsat), (cell_fields(msg.level), ncell)):
         for role, df in group:
+            f = FIELDS[df]
             arr = getattr(msg, role)
-            yield role, df, (None if arr is None else np.asarray(arr)), count
-
-
-_BIT_SHIFTS = {w: np.arange(w - 1, -1, -1, dtype=np.int64) for w in range(1, 33)}
+            if arr is None:
+                if role != "ext_info":
+                    raise EncodeError(f"MSM{msg.level} needs {role} ({df})")
+                arr = np.zeros(count, dtype=np.int64)  # reserved: zeros
+            arr = np.asarray(arr)
+            if arr.shape != (count,):
+                raise EncodeError(f"{role} ({df}) has shape {arr.shape}, expected ({count},)")
+            arrays.append(arr)
+            widths.append(f.width)
+            los.append(f.raw_min)
+            his.append(f.raw_max)
+            counts.append(count)
+            names.append((role, f))
+    values = np.concatenate(arrays).astype(np.int64)
+    bad = (values < np.repeat(los, counts)) | (values > np.repeat(his, counts))
+    if bad.any():
+        k = int(np.searchsorted(np.cumsum(counts), int(np.argmax(bad)), side="right"))
+        role, f = names[k]
+        raise EncodeError(f"{role} ({f.name}, {f.what}) outside [{f.raw_min}, {f.raw_max}]")
+    return values, np.repeat(widths, counts)
 
 
 def encode_msm(msg: MsmMessage) -> bytes:
     """The payload of one MSM (raises ``EncodeError`` on inconsistent or out-of-range values).
 
     A straightforward bit writer, independent of the batch packer (which tests compare it with):
-    the header as one Python integer, then each field array spread to a (n, width) bit matrix.
+    the header as one Python integer, then every field value spread to 32 bits of which the low
+    ``width`` are kept, in transmission order.
     """
-    check_msm(msg)
-    nsat, nsig, ncell = msg.nsat, msg.nsig, msg.ncell
+    values, widths = check_msm(msg)
+    nsat, nsig = msg.nsat, msg.nsig
     acc = msg.msg_type
     for v, w in ((msg.station_id, 12), (msg.epoch, 30), (msg.multiple, 1), (msg.iods, 3), (msg.reserved, 7),
                  (msg.clock_steering, 2), (msg.external_clock, 2), (msg.smoothing, 1),
@@ -350,13 +365,10 @@ def encode_msm(msg: MsmMessage) -> bytes:
         acc = (acc << w) | v
     nhead = HEADER_BITS_BEFORE_CELL_MASK + nsat * nsig
     head = np.unpackbits(np.frombuffer(acc.to_bytes((nhead + 7) // 8, "big"), dtype=np.uint8))
-    bits = [head[len(head) - nhead :]]
-    for _, df, arr, count in _body(msg, nsat, ncell):
-        if arr is None:
-            arr = np.zeros(count, dtype=np.int64)
-        # arithmetic shift of int64 gives the two's complement bits of negative values
-        bits.append(((arr.astype(np.int64)[:, None] >> _BIT_SHIFTS[FIELDS[df].width]) & 1).astype(np.uint8).ravel())
-    return np.packbits(np.concatenate(bits)).tobytes()
+    spread = (values[:, None] >> _SHIFTS_32) & 1  # arithmetic shift: two's complement bits of negatives
+    keep = _SHIFTS_32 < widths[:, None]
+    bits = np.concatenate([head[len(head) - nhead :], spread[keep].astype(np.uint8)])
+    return np.packbits(bits).tobytes()
 
 
 def msm_from_fields(fields: dict[str, object]) -> MsmMessage:

@@ -15,6 +15,7 @@ The sums in milliseconds are exact in binary floating point (dyadic, < 2^53), so
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -102,7 +103,14 @@ class Observables:
 
 def wavelengths(system: str, sig_ids) -> np.ndarray:
     """Carrier wavelength [m] per MSM signal id, from the signals table."""
-    return np.array([by_msm(system, int(s)).wavelength_m for s in np.asarray(sig_ids).ravel()], dtype=np.float64)
+    return _wavelengths(system, tuple(np.asarray(sig_ids).ravel().tolist()))
+
+
+@lru_cache(maxsize=4096)
+def _wavelengths(system: str, sig_ids: tuple[int, ...]) -> np.ndarray:
+    lam = np.array([by_msm(system, int(s)).wavelength_m for s in sig_ids], dtype=np.float64)
+    lam.setflags(write=False)  # shared between callers
+    return lam
 
 
 def msm_to_observables(msg: MsmMessage) -> Observables:
