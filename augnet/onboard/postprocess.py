@@ -1,0 +1,38 @@
+"""Post-processing like RTKLIB's rnx2rtkp: rover and base observation files + navigation -> solutions.
+
+Epochs are matched by time: each rover epoch is processed with the latest base epoch not after it
+(within half an interval of tolerance), so a missing base epoch ages the corrections rather than
+stopping the run; the filter itself decides when they are too old.
+"""
+
+from __future__ import annotations
+
+from typing import Iterator
+
+import numpy as np
+
+from augnet.gnss.ephemeris import NavigationData
+from augnet.onboard.observations import ObsArrays, choose_signals, epochs
+from augnet.onboard.rtk import RtkFilter, RtkOptions, RtkSolution
+
+# A base epoch up to this much [s] after the rover epoch still counts as simultaneous (time-tag
+# rounding between receivers).
+EPOCH_MATCH_TOLERANCE_S = 0.05
+
+
+def process(rover: ObsArrays, base: ObsArrays, nav: NavigationData, base_position_m,
+            options: RtkOptions | None = None) -> Iterator[RtkSolution]:
+    """Solutions for every rover epoch, in time order."""
+    opt = options or RtkOptions()
+    rsig = choose_signals(rover, opt.n_slots, opt.systems)
+    bsig = choose_signals(base, opt.n_slots, opt.systems)
+    rov_epochs = epochs(rover, opt.n_slots, opt.systems, rsig)
+    base_epochs = epochs(base, opt.n_slots, opt.systems, bsig)
+    base_times = np.array([e.time for e in base_epochs])
+    order = np.argsort(base_times, kind="stable")
+    base_times = base_times[order]
+    flt = RtkFilter(nav, base_position_m, opt)
+    for ep in rov_epochs:
+        k = int(np.searchsorted(base_times, ep.time + EPOCH_MATCH_TOLERANCE_S, side="right")) - 1
+        b = base_epochs[order[k]] if k >= 0 else None
+        yield flt.step(ep, b)

@@ -1,0 +1,641 @@
+"""Real-time kinematic positioning: an extended Kalman filter on double differences, with integer
+ambiguity resolution (LAMBDA, partial fixing, ratio test and bootstrapped success rate) and
+fix-and-hold.
+
+State: rover ECEF position (and velocity and acceleration when the dynamic model is on), then one
+*single-difference* (rover minus base) carrier ambiguity per satellite and frequency slot, in
+cycles.  Measurements are double differences (per system and slot, against that group's highest
+satellite) of phase and code; forming DDs in the measurement model rather than in the state lets
+satellites rise and set and the reference change without touching the state.  Short baselines are
+assumed: DD ionosphere and troposphere residuals are not estimated (a network VRS or a base within
+~10-20 km keeps them at the centimetre level), the models are applied at each receiver.
+
+Status per epoch (RTKLIB's Q codes so tools compare): FIX (1) when a validated integer set is
+applied, FLOAT (2), SINGLE (5) when the rover falls back to SPP (no or stale corrections, base
+inconsistent, filter diverged), NONE (0) when not even SPP is possible.  `step` never raises on
+data; each solution carries a message saying why it is what it is.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from enum import IntEnum
+from typing import Sequence
+
+import numpy as np
+from threadpoolctl import ThreadpoolController
+
+from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
+from augnet.gnss.ambiguity import AmbiguityError, PartialFix, partial_fix
+from augnet.gnss.ephemeris import NavigationData
+from augnet.gnss.geometry import azimuth_elevation, ecef_to_geodetic
+from augnet.onboard.atmosphere import saastamoinen_m
+from augnet.onboard.cycleslip import SlipDetector
+from augnet.onboard.observations import EpochObs
+from augnet.onboard.spp import SppOptions, SppResult, geometric_range, satellite_positions, solve_spp
+
+
+class Status(IntEnum):
+    NONE = 0
+    FIX = 1
+    FLOAT = 2
+    SINGLE = 5
+
+
+# Carrier-phase noise sigma^2 = a^2 + b^2/sin^2(el) per receiver [m] (RTKLIB's defaults, typical of
+# geodetic and good automotive receivers); code noise is the phase noise times this ratio.
+PHASE_SIGMA_A_M = 0.003
+PHASE_SIGMA_B_M = 0.003
+CODE_PHASE_ERROR_RATIO = 100.0
+# Initial standard deviations of new states.
+INIT_POSITION_SIGMA_M = 30.0
+INIT_VELOCITY_SIGMA_M_S = 10.0
+INIT_ACCELERATION_SIGMA_M_S2 = 10.0
+INIT_AMBIGUITY_SIGMA_CYC = 30.0
+# Random-walk process noise of a single-difference ambiguity [cycles / sqrt(s)].
+AMBIGUITY_PROCESS_SIGMA_CYC = 1e-4
+# Acceleration process noise (white jerk) [m/s^2 / sqrt(s)]: horizontal and vertical.  A train
+# brakes at ~1 m/s^2 and accelerates slower; a road vehicle changes faster, hence 3 by default.
+ACCEL_PROCESS_SIGMA_H = 3.0
+ACCEL_PROCESS_SIGMA_V = 1.0
+# Corrections older than this are stale: RTK is abandoned for SPP.  Network RTK practice: corrections
+# normally arrive under 2 s old and must stay under 5 s (../shared/design/network-rtk.md); in
+# post-processing a missing base epoch simply ages the last one.
+DEFAULT_MAX_AGE_S = 5.0
+# Beyond this baseline [m] the short-baseline model (no DD ionosphere) breaks down; also, a base
+# position given wrong by more than this cannot be RTK'd against.
+DEFAULT_MAX_BASELINE_M = 100_000.0
+# The base's own SPP must agree with its given coordinates within this [m], or the coordinates (or
+# the base data) are wrong and a "fixed" rover would be wrong by the same amount.
+BASE_POSITION_TOLERANCE_M = 100.0
+# Prefit screening: code DD innovations beyond this [m] are blunders; a phase DD whose ambiguity is
+# already known (sigma below AMB_KNOWN_SIGMA_CYC) and whose innovation exceeds
+# max(PHASE_INNOVATION_SIGMAS * sigma, PHASE_INNOVATION_MIN_M) is a slip the detectors missed.
+MAX_CODE_INNOVATION_M = 30.0
+PHASE_INNOVATION_SIGMAS = 6.0
+PHASE_INNOVATION_MIN_M = 0.10
+AMB_KNOWN_SIGMA_CYC = 0.5
+# Phase observations of a satellite not updated for more epochs than this lose their ambiguity.
+MAX_AMBIGUITY_OUTAGE_EPOCHS = 5
+# Fix-and-hold: after this many consecutive fixes the integers are fed back into the float filter
+# as pseudo-observations with this variance [cycles^2] (RTKLIB uses 0.001 cycle^2 as well).
+HOLD_AFTER_FIXES = 5
+HOLD_VARIANCE_CYC2 = 0.001
+# A time step longer than this [s] restarts the position/velocity part of the filter.
+MAX_PREDICTION_GAP_S = 30.0
+# Fixed solutions whose DD phase residuals exceed this [m] are rejected (wrong fix).
+MAX_FIXED_PHASE_RESIDUAL_M = 0.05
+SOLUTION_STATUS_NAMES = {Status.NONE: "none", Status.FIX: "fix", Status.FLOAT: "float", Status.SINGLE: "single"}
+
+
+@dataclass
+class RtkOptions:
+    mode: str = "kinematic"  # 'kinematic' or 'static'
+    dynamics: bool = False  # kinematic only: position-velocity-acceleration model (else white position)
+    elevation_mask_rad: float = math.radians(15.0)
+    systems: Sequence[str] = ("G", "E", "C", "J")
+    n_slots: int = 2
+    phase_sigma_a_m: float = PHASE_SIGMA_A_M
+    phase_sigma_b_m: float = PHASE_SIGMA_B_M
+    code_phase_ratio: float = CODE_PHASE_ERROR_RATIO
+    ratio_threshold: float = 3.0
+    min_success_rate: float = 0.999
+    min_fix_ambiguities: int = 4
+    fix_and_hold: bool = True
+    ambiguity_resolution: bool = True
+    max_age_s: float = DEFAULT_MAX_AGE_S
+    max_baseline_m: float = DEFAULT_MAX_BASELINE_M
+    accel_sigma_h: float = ACCEL_PROCESS_SIGMA_H
+    accel_sigma_v: float = ACCEL_PROCESS_SIGMA_V
+    spp: SppOptions = field(default_factory=SppOptions)
+
+
+@dataclass
+class RtkSolution:
+    time: float
+    status: Status
+    position_m: np.ndarray  # (3,) ECEF
+    covariance_m2: np.ndarray  # (3, 3) ECEF
+    n_sats: int = 0  # satellites used (with both receivers' data for RTK)
+    ratio: float = 0.0
+    success_rate: float = 0.0
+    n_fixed: int = 0  # ambiguities (decorrelated combinations) fixed
+    age_s: float = math.nan
+    baseline_m: float = math.nan
+    velocity_m_s: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    message: str = ""
+
+    @property
+    def status_name(self) -> str:
+        return SOLUTION_STATUS_NAMES[self.status]
+
+
+@dataclass
+class _Group:
+    """The DD rows of one system and slot at one epoch."""
+    sats: list[int]  # indices into the epoch's satellite list; first is the reference
+    slot: int
+
+
+class RtkFilter:
+    """The rover's RTK engine.  Feed it epochs with `step`; it keeps its own state between them."""
+
+    def __init__(self, nav: NavigationData, base_position_m, options: RtkOptions | None = None):
+        self.nav = nav
+        self.opt = options or RtkOptions()
+        self.base_position_m = np.asarray(base_position_m, dtype=float)
+        self.n_kin = 9 if (self.opt.mode == "kinematic" and self.opt.dynamics) else 3
+        self.x = np.zeros(self.n_kin)
+        self.P = np.zeros((self.n_kin, self.n_kin))
+        self.amb_index: dict[tuple[str, int], int] = {}
+        self._free: list[int] = []
+        self.amb_outage: dict[tuple[str, int], int] = {}
+        self.initialised = False
+        self.t_prev = math.nan
+        self.rover_slips = SlipDetector()
+        self.base_slips = SlipDetector()
+        self.consecutive_fixes = 0
+        self.last_fix: tuple[PartialFix, np.ndarray, np.ndarray] | None = None
+        self._base_checked_time = math.nan
+        self._base_ok = True
+        self._base_msg = ""
+
+    # -----------------------------------------------------------------------------------------
+    # state bookkeeping
+
+    def reset(self) -> None:
+        self.__init__(self.nav, self.base_position_m, self.opt)
+
+    def _new_amb(self, key, value, var) -> int:
+        if self._free:
+            i = self._free.pop()
+        else:
+            i = len(self.x)
+            self.x = np.append(self.x, 0.0)
+            P = np.zeros((i + 1, i + 1))
+            P[:i, :i] = self.P
+            self.P = P
+        self.x[i] = value
+        self.P[i, :] = 0.0
+        self.P[:, i] = 0.0
+        self.P[i, i] = var
+        self.amb_index[key] = i
+        self.amb_outage[key] = 0
+        return i
+
+    def _drop_amb(self, key) -> None:
+        i = self.amb_index.pop(key, None)
+        self.amb_outage.pop(key, None)
+        if i is not None:
+            self.x[i] = 0.0
+            self.P[i, :] = 0.0
+            self.P[:, i] = 0.0
+            self._free.append(i)
+
+    # -----------------------------------------------------------------------------------------
+
+    def step(self, rover: EpochObs, base: EpochObs | None, base_time: float | None = None) -> RtkSolution:
+        """Process one rover epoch with the latest base epoch (None when there is none).
+
+        `base_time` is the base epoch's time when it differs from `base.time` (never needed for
+        RINEX); the age of corrections is rover time minus base time.
+        """
+        try:
+            # Small matrices: BLAS threads cost far more than they save (15x slower on 2 busy cores).
+            with _blas_controller().limit(limits=1, user_api="blas"):
+                return self._step(rover, base)
+        except (ValueError, FloatingPointError, np.linalg.LinAlgError, AmbiguityError) as exc:
+            # Numbers that break the filter: restart it and say so; the next epoch starts afresh.
+            self.reset()
+            spp = solve_spp(rover, self.nav, self._spp_options())
+            return self._single(rover.time, spp, f"filter reset after numerical failure: {exc}")
+
+    def _spp_options(self) -> SppOptions:
+        o = self.opt.spp
+        o.systems = tuple(self.opt.systems)
+        return o
+
+    def _single(self, t, spp: SppResult, msg: str, age=math.nan) -> RtkSolution:
+        if spp.ok:
+            return RtkSolution(t, Status.SINGLE, spp.position_m, spp.covariance_m2, spp.n_used, age_s=age,
+                               message=msg if not spp.message else f"{msg}; {spp.message}")
+        return RtkSolution(t, Status.NONE, np.full(3, np.nan), np.full((3, 3), np.nan), 0, age_s=age,
+                           message=f"{msg}; {spp.message}")
+
+    def _step(self, rover: EpochObs, base: EpochObs | None) -> RtkSolution:
+        opt = self.opt
+        t = rover.time
+        spp = solve_spp(rover, self.nav, self._spp_options(),
+                        initial_m=self.x[:3] if self.initialised else None)
+        if base is None:
+            self._time_update(t, spp, advance_only=True)
+            return self._single(t, spp, "no base observations")
+        age = t - base.time
+        if not np.isfinite(age) or age < -0.5 or age > opt.max_age_s:
+            self._time_update(t, spp, advance_only=True)
+            return self._single(t, spp, f"corrections stale: age {age:.1f} s over {opt.max_age_s:.1f} s", age)
+        if not spp.ok and not self.initialised:
+            return self._single(t, spp, "no rover position to start from", age)
+        # The base's coordinates must be consistent with its data (checked once per base epoch).
+        if base.time != self._base_checked_time:
+            self._base_checked_time = base.time
+            bspp = solve_spp(base, self.nav, self._spp_options(), initial_m=self.base_position_m)
+            if bspp.ok:
+                d = float(np.linalg.norm(bspp.position_m - self.base_position_m))
+                self._base_ok = d <= BASE_POSITION_TOLERANCE_M
+                self._base_msg = f"base position inconsistent with base data by {d:.0f} m"
+            else:
+                self._base_ok, self._base_msg = True, ""
+        if not self._base_ok:
+            self._time_update(t, spp, advance_only=True)
+            return self._single(t, spp, self._base_msg, age)
+        ref_pos = spp.position_m if spp.ok else self.x[:3]
+        baseline = float(np.linalg.norm(ref_pos - self.base_position_m))
+        if baseline > opt.max_baseline_m:
+            self._time_update(t, spp, advance_only=True)
+            return self._single(t, spp, f"baseline {baseline / 1e3:.0f} km beyond {opt.max_baseline_m / 1e3:.0f} km", age)
+
+        self._time_update(t, spp)
+        sol = self._measurement_update(rover, base, spp, age)
+        return sol
+
+    # -----------------------------------------------------------------------------------------
+    # time update
+
+    def _time_update(self, t: float, spp: SppResult, advance_only: bool = False) -> None:
+        dt = t - self.t_prev if np.isfinite(self.t_prev) else math.inf
+        self.t_prev = t
+        nk = self.n_kin
+        # ambiguity random walk
+        if np.isfinite(dt) and dt > 0:
+            for i in self.amb_index.values():
+                self.P[i, i] += AMBIGUITY_PROCESS_SIGMA_CYC**2 * dt
+        if advance_only and not self.initialised:
+            return
+        restart = (not self.initialised) or dt > MAX_PREDICTION_GAP_S or dt <= 0
+        if self.opt.mode == "static" and not restart:
+            return
+        if self.opt.mode == "kinematic" and self.n_kin == 3 or restart:
+            # white position (RTKLIB's 'dynamics off'): start from SPP every epoch
+            if not spp.ok:
+                if not self.initialised:
+                    return
+                if restart or self.n_kin == 3:
+                    # no fresh position: keep the old one with a generous uncertainty
+                    self.P[:3, :] = 0.0
+                    self.P[:, :3] = 0.0
+                    self.P[:3, :3] = np.eye(3) * INIT_POSITION_SIGMA_M**2
+                    return
+            else:
+                self.x[:3] = spp.position_m
+                self.P[:nk, :] = 0.0
+                self.P[:, :nk] = 0.0
+                self.P[:3, :3] = np.eye(3) * INIT_POSITION_SIGMA_M**2
+                if nk == 9:
+                    self.x[3:9] = 0.0
+                    self.P[3:6, 3:6] = np.eye(3) * INIT_VELOCITY_SIGMA_M_S**2
+                    self.P[6:9, 6:9] = np.eye(3) * INIT_ACCELERATION_SIGMA_M_S2**2
+                self.initialised = True
+                return
+        if nk == 9:
+            F = np.eye(9)
+            F[0:3, 3:6] = np.eye(3) * dt
+            F[0:3, 6:9] = np.eye(3) * 0.5 * dt * dt
+            F[3:6, 6:9] = np.eye(3) * dt
+            n = len(self.x)
+            self.x[:9] = F @ self.x[:9]
+            Pk = self.P[:9, :9]
+            Pka = self.P[:9, 9:]
+            self.P[:9, :9] = F @ Pk @ F.T
+            self.P[:9, 9:] = F @ Pka
+            self.P[9:, :9] = self.P[:9, 9:].T
+            # white-jerk noise on acceleration, in local ENU then rotated to ECEF
+            llh = ecef_to_geodetic(self.x[:3])
+            from augnet.gnss.geometry import enu_rotation
+
+            R = enu_rotation(llh[0], llh[1])
+            q = R.T @ np.diag([self.opt.accel_sigma_h**2, self.opt.accel_sigma_h**2, self.opt.accel_sigma_v**2]) @ R
+            # continuous white jerk integrated over dt (van Loan), acceleration-block dominant terms
+            self.P[6:9, 6:9] += q * dt
+            self.P[3:6, 3:6] += q * dt**3 / 3.0
+            self.P[0:3, 0:3] += q * dt**5 / 20.0
+            self.P[3:6, 6:9] += q * dt**2 / 2.0
+            self.P[6:9, 3:6] += q * dt**2 / 2.0
+            self.P[0:3, 6:9] += q * dt**3 / 6.0
+            self.P[6:9, 0:3] += q * dt**3 / 6.0
+            self.P[0:3, 3:6] += q * dt**4 / 8.0
+            self.P[3:6, 0:3] += q * dt**4 / 8.0
+            del n
+
+    # -----------------------------------------------------------------------------------------
+    # measurement update
+
+    def _zero_diff(self, obs: EpochObs, rx_m: np.ndarray, sp):
+        """Observed minus modelled (range, troposphere, satellite clock) per satellite and slot [m],
+        for phase and code, and the line-of-sight unit vectors and elevations."""
+        rng, los = geometric_range(np.where(sp.valid[:, None], sp.position_m, rx_m + 1.0), rx_m)
+        az, el = azimuth_elevation(rx_m, np.where(sp.valid[:, None], sp.position_m, rx_m + np.array([0, 0, 1.0])))
+        llh = ecef_to_geodetic(rx_m)
+        trop = saastamoinen_m(llh[0], llh[2], el)
+        model = rng + trop - SPEED_OF_LIGHT_M_S * sp.clock_s
+        phase = obs.phase_cyc * obs.wavelength_m - model[:, None]
+        code = obs.code_m - model[:, None]
+        return phase, code, los, el
+
+    def _variance(self, el: np.ndarray) -> np.ndarray:
+        s = np.maximum(np.sin(el), 0.05)
+        return self.opt.phase_sigma_a_m**2 + self.opt.phase_sigma_b_m**2 / s**2
+
+    def _measurement_update(self, rover: EpochObs, base: EpochObs, spp: SppResult, age: float) -> RtkSolution:
+        opt = self.opt
+        t = rover.time
+        # common satellites
+        common, ri, bi = np.intersect1d(rover.sats, base.sats, return_indices=True)
+        sysmask = np.isin(np.array([s[0] for s in common]), list(opt.systems))
+        common, ri, bi = common[sysmask], ri[sysmask], bi[sysmask]
+        rslip = self.rover_slips.detect(rover)
+        bslip = self.base_slips.detect(base)
+        nf = min(opt.n_slots, rover.n_slots, base.n_slots)
+        if len(common) == 0:
+            return self._float_or_single(t, spp, age, 0, "no satellites common to rover and base")
+        ro = rover.take(ri)
+        bo = base.take(bi)
+        slips = rslip[ri, :nf] | bslip[bi, :nf]
+        sp_r = satellite_positions(self.nav, ro.sats, t, ro.code_m[:, 0] if nf else None)
+        sp_b = satellite_positions(self.nav, bo.sats, bo.time, bo.code_m[:, 0])
+        valid = sp_r.valid & sp_b.valid
+        # same issue of data at both ends, or the orbit error does not cancel
+        valid &= sp_r.ephemeris_index == sp_b.ephemeris_index
+        phase_b, code_b, _, el_b = self._zero_diff(bo, self.base_position_m, sp_b)
+        wl = ro.wavelength_m[:, :nf]
+        same_wl = np.isclose(wl, bo.wavelength_m[:, :nf], rtol=0, atol=1e-9)
+
+        # handle slips: reset those ambiguities
+        for k, sat in enumerate(ro.sats):
+            for f in range(nf):
+                if slips[k, f]:
+                    self._drop_amb((str(sat), f))
+        # outage bookkeeping
+        for key in list(self.amb_outage):
+            self.amb_outage[key] += 1
+            if self.amb_outage[key] > MAX_AMBIGUITY_OUTAGE_EPOCHS:
+                self._drop_amb(key)
+
+        x_rov = self.x[:3].copy()
+        sys_ = np.array([s[0] for s in ro.sats])
+        for _it in range(1):
+            phase_r, code_r, los_r, el_r = self._zero_diff(ro, x_rov, sp_r)
+            el_use = np.minimum(el_r, np.inf)
+            ok_sat = valid & (el_use >= opt.elevation_mask_rad) & np.isfinite(el_b)
+            sd_phase = phase_r[:, :nf] - phase_b[:, :nf]
+            sd_code = code_r[:, :nf] - code_b[:, :nf]
+            ok = ok_sat[:, None] & np.isfinite(sd_phase) & np.isfinite(sd_code) & same_wl & np.isfinite(wl)
+            var_sd = (self._variance(el_r) + self._variance(el_b))[:, None] * np.ones((1, nf))
+            # initialise missing ambiguities from code (cycles)
+            for k in range(len(ro.sats)):
+                for f in range(nf):
+                    if ok[k, f]:
+                        key = (str(ro.sats[k]), f)
+                        if key not in self.amb_index:
+                            obs_sd_phase_cyc = (ro.phase_cyc[k, f] - bo.phase_cyc[k, f])
+                            obs_sd_code_m = ro.code_m[k, f] - bo.code_m[k, f]
+                            self._new_amb(key, obs_sd_phase_cyc - obs_sd_code_m / wl[k, f],
+                                          INIT_AMBIGUITY_SIGMA_CYC**2)
+            groups = self._groups(ro.sats, sys_, ok, el_r, nf)
+            n_sat_used = len({k for g in groups for k in g.sats})
+            if not groups:
+                return self._float_or_single(t, spp, age, 0, "too few common satellites above the mask")
+            rows = self._build_rows(groups, ro.sats, sd_phase, sd_code, los_r, wl, var_sd)
+            if rows is None:
+                return self._float_or_single(t, spp, age, 0, "no double differences")
+            v, H, R, kind, keys = rows
+            # prefit screening
+            S_diag = np.einsum("ij,jk,ik->i", H, self.P, H) + np.diag(R)
+            bad = np.zeros(len(v), bool)
+            bad |= (kind == 0) & (np.abs(v) > MAX_CODE_INNOVATION_M)
+            known = np.array([self._amb_known(kk) for kk in keys])
+            bad_ph = (kind == 1) & known & (np.abs(v) > np.maximum(PHASE_INNOVATION_SIGMAS * np.sqrt(S_diag), PHASE_INNOVATION_MIN_M))
+            if np.any(bad_ph):
+                # a slip: re-initialise the ambiguities involved and rebuild (the reference slipping
+                # shows as most of its group's rows failing together)
+                for key in self._slipped_keys(bad_ph, kind, keys, groups, ro.sats):
+                    self._drop_amb(key)
+                    k = int(np.flatnonzero(ro.sats == key[0])[0])
+                    f = key[1]
+                    obs_sd_phase_cyc = (ro.phase_cyc[k, f] - bo.phase_cyc[k, f])
+                    obs_sd_code_m = ro.code_m[k, f] - bo.code_m[k, f]
+                    self._new_amb(key, obs_sd_phase_cyc - obs_sd_code_m / wl[k, f], INIT_AMBIGUITY_SIGMA_CYC**2)
+                v, H, R, kind, keys = self._build_rows(groups, ro.sats, sd_phase, sd_code, los_r, wl, var_sd)
+            keep = ~((kind == 0) & (np.abs(v) > MAX_CODE_INNOVATION_M))
+            v, H, R = v[keep], H[keep], R[np.ix_(keep, keep)]
+            self._kalman_update(v, H, R)
+        # ambiguities seen this epoch are fresh
+        for g in groups:
+            for k in g.sats:
+                key = (str(ro.sats[k]), g.slot)
+                if key in self.amb_outage:
+                    self.amb_outage[key] = 0
+        float_pos = self.x[:3].copy()
+        float_cov = self.P[:3, :3].copy()
+        sol = RtkSolution(t, Status.FLOAT, float_pos, float_cov, n_sat_used, age_s=age,
+                          baseline_m=float(np.linalg.norm(float_pos - self.base_position_m)),
+                          velocity_m_s=self.x[3:6].copy() if self.n_kin == 9 else np.full(3, np.nan),
+                          message="float")
+        if not np.all(np.isfinite(float_pos)) or np.trace(float_cov) > 1e6:
+            self.reset()
+            return self._single(t, spp, "filter diverged, restarted", age)
+        if opt.ambiguity_resolution:
+            self._resolve(sol, groups, ro, sd_phase, los_r, wl, x_rov)
+        return sol
+
+    def _amb_known(self, key) -> bool:
+        i = self.amb_index.get(key)
+        return i is not None and self.P[i, i] < AMB_KNOWN_SIGMA_CYC**2
+
+    def _slipped_keys(self, bad, kind, keys, groups, sats):
+        """Which ambiguities to reset given failing phase rows: the row's satellite, or the group's
+        reference when at least half of its known rows fail."""
+        out = set()
+        for g in groups:
+            ref_key = (str(sats[g.sats[0]]), g.slot)
+            idx = [r for r in range(len(keys)) if kind[r] == 1 and keys[r] is not None and keys[r][1] == g.slot
+                   and (str(sats[g.sats[0]]), g.slot) == self._row_ref.get(r)]
+            if not idx:
+                continue
+            nbad = sum(bool(bad[r]) for r in idx)
+            if nbad >= max(2, (len(idx) + 1) // 2):
+                out.add(ref_key)
+            else:
+                out.update(keys[r] for r in idx if bad[r])
+        return out
+
+    def _groups(self, sats, sys_, ok, el, nf) -> list[_Group]:
+        groups = []
+        for s in self.opt.systems:
+            for f in range(nf):
+                members = np.flatnonzero(ok[:, f] & (sys_ == s))
+                if len(members) < 2:
+                    continue
+                # reference: highest elevation among satellites with an established ambiguity if any
+                est = [k for k in members if self._amb_known((str(sats[k]), f))]
+                pool = est if est else list(members)
+                ref = max(pool, key=lambda k: el[k])
+                groups.append(_Group([int(ref)] + [int(k) for k in members if k != ref], f))
+        return groups
+
+    def _build_rows(self, groups, sats, sd_phase, sd_code, los, wl, var_sd):
+        nx = len(self.x)
+        vs, Hs, kinds, keys = [], [], [], []
+        blocks = []
+        self._row_ref = {}
+        for g in groups:
+            ref = g.sats[0]
+            f = g.slot
+            ref_key = (str(sats[ref]), f)
+            iref = self.amb_index[ref_key]
+            others = g.sats[1:]
+            for kind in (1, 0):  # phase rows then code rows
+                start = len(vs)
+                for k in others:
+                    key = (str(sats[k]), f)
+                    h = np.zeros(nx)
+                    h[:3] = -(los[k] - los[ref])
+                    if kind == 1:
+                        i = self.amb_index[key]
+                        y = sd_phase[k, f] - sd_phase[ref, f]
+                        pred = h[:3] @ np.zeros(3) + wl[k, f] * self.x[i] - wl[ref, f] * self.x[iref]
+                        h[i] = wl[k, f]
+                        h[iref] = -wl[ref, f]
+                        keys.append(key)
+                        self._row_ref[len(vs)] = ref_key
+                    else:
+                        y = sd_code[k, f] - sd_code[ref, f]
+                        pred = 0.0
+                        keys.append(None)
+                    vs.append(y - pred)
+                    Hs.append(h)
+                    kinds.append(kind)
+                n = len(vs) - start
+                ratio2 = 1.0 if kind == 1 else self.opt.code_phase_ratio**2
+                Rb = np.diag([var_sd[k, f] * ratio2 for k in others]) + var_sd[ref, f] * ratio2
+                blocks.append(Rb[:n, :n])
+        if not vs:
+            return None
+        R = _block_diag(blocks)
+        # the position part of the residual: sd ranges were computed at x_rov = self.x[:3], so the
+        # linearisation point is the current state and v needs no position term
+        return np.array(vs), np.array(Hs), R, np.array(kinds), keys
+
+    def _kalman_update(self, v, H, R) -> None:
+        active = np.flatnonzero(np.any(H != 0.0, axis=0) | (np.arange(len(self.x)) < self.n_kin))
+        Ha = H[:, active]
+        Pa = self.P[np.ix_(active, np.arange(len(self.x)))]
+        PHt = Pa.T @ Ha.T  # (nx, m)
+        S = Ha @ self.P[np.ix_(active, active)] @ Ha.T + R
+        K = np.linalg.solve(S, PHt.T).T  # (nx, m)
+        self.x = self.x + K @ v
+        self.P = self.P - K @ (Ha @ Pa)
+        self.P = 0.5 * (self.P + self.P.T)
+
+    def _resolve(self, sol: RtkSolution, groups, ro, sd_phase, los, wl, x_lin) -> None:
+        opt = self.opt
+        # DD ambiguity transform over the SD ambiguity states of this epoch
+        amb_states = []
+        D_rows = []
+        for g in groups:
+            ref_key = (str(ro.sats[g.sats[0]]), g.slot)
+            iref = self.amb_index[ref_key]
+            for k in g.sats[1:]:
+                i = self.amb_index[(str(ro.sats[k]), g.slot)]
+                D_rows.append((i, iref))
+        if len(D_rows) < opt.min_fix_ambiguities:
+            self.consecutive_fixes = 0
+            sol.message = "float: too few ambiguities to fix"
+            return
+        idx = sorted({i for pair in D_rows for i in pair})
+        pos = {i: c for c, i in enumerate(idx)}
+        D = np.zeros((len(D_rows), len(idx)))
+        for r, (i, iref) in enumerate(D_rows):
+            D[r, pos[i]] = 1.0
+            D[r, pos[iref]] = -1.0
+        xa = self.x[idx]
+        Paa = self.P[np.ix_(idx, idx)]
+        a_dd = D @ xa
+        Q_dd = D @ Paa @ D.T
+        try:
+            fix = partial_fix(a_dd, Q_dd, min_success_rate=opt.min_success_rate,
+                              ratio_threshold=opt.ratio_threshold, min_count=opt.min_fix_ambiguities)
+        except AmbiguityError as exc:
+            self.consecutive_fixes = 0
+            sol.message = f"float: ambiguity covariance unusable ({exc})"
+            return
+        if fix is None:
+            self.consecutive_fixes = 0
+            sol.message = "float: no ambiguity subset passed ratio and success-rate tests"
+            return
+        # constraint Zs^T D a_sd = z on the full state
+        nx = len(self.x)
+        Hc = np.zeros((fix.count, nx))
+        Hc[:, idx] = fix.Zs.T @ D
+        S = Hc @ self.P @ Hc.T
+        try:
+            K = np.linalg.solve(S, Hc @ self.P).T
+        except np.linalg.LinAlgError:
+            sol.message = "float: fixed-ambiguity constraint singular"
+            return
+        x_fix = self.x - K @ (Hc @ self.x - fix.z_fixed)
+        P_fix = self.P - K @ Hc @ self.P
+        # validate: DD phase residuals with the fixed state must be at noise level
+        dx = x_fix[:3] - x_lin  # the phase residuals were formed at the linearisation point
+        max_res = 0.0
+        for g in groups:
+            ref = g.sats[0]
+            iref = self.amb_index[(str(ro.sats[ref]), g.slot)]
+            for k in g.sats[1:]:
+                i = self.amb_index[(str(ro.sats[k]), g.slot)]
+                y = sd_phase[k, g.slot] - sd_phase[ref, g.slot]
+                pred = -(los[k] - los[ref]) @ dx + wl[k, g.slot] * x_fix[i] - wl[ref, g.slot] * x_fix[iref]
+                max_res = max(max_res, abs(y - pred))
+        if max_res > MAX_FIXED_PHASE_RESIDUAL_M:
+            self.consecutive_fixes = 0
+            sol.message = f"float: fixed solution rejected (phase residual {max_res * 100:.1f} cm)"
+            return
+        sol.status = Status.FIX
+        sol.position_m = x_fix[:3].copy()
+        sol.covariance_m2 = 0.5 * (P_fix[:3, :3] + P_fix[:3, :3].T)
+        sol.ratio = float(min(fix.ratio, 999.9))
+        sol.success_rate = float(fix.success_rate)
+        sol.n_fixed = fix.count
+        sol.message = f"fix: {fix.count}/{len(D_rows)} ambiguities"
+        if self.n_kin == 9:
+            sol.velocity_m_s = x_fix[3:6].copy()
+        self.consecutive_fixes += 1
+        if opt.fix_and_hold and self.consecutive_fixes >= HOLD_AFTER_FIXES:
+            R = np.eye(fix.count) * HOLD_VARIANCE_CYC2
+            v = fix.z_fixed - Hc @ self.x
+            self._kalman_update(v, Hc, R)
+
+    def _float_or_single(self, t, spp, age, n, msg) -> RtkSolution:
+        return self._single(t, spp, msg, age)
+
+
+_BLAS_CONTROLLER: ThreadpoolController | None = None
+
+
+def _blas_controller() -> ThreadpoolController:
+    global _BLAS_CONTROLLER
+    if _BLAS_CONTROLLER is None:
+        _BLAS_CONTROLLER = ThreadpoolController()
+    return _BLAS_CONTROLLER
+
+
+def _block_diag(blocks: list[np.ndarray]) -> np.ndarray:
+    n = sum(b.shape[0] for b in blocks)
+    R = np.zeros((n, n))
+    i = 0
+    for b in blocks:
+        m = b.shape[0]
+        R[i:i + m, i:i + m] = b
+        i += m
+    return R

@@ -1,0 +1,291 @@
+"""Single point positioning: iterated weighted least squares on pseudoranges, multi-GNSS.
+
+Used for the GGA the rover sends to the caster, as the fallback when there are no usable
+corrections, and as the RTK filter's starting point.  Unknowns: ECEF position and one receiver
+clock per satellite system (GPS, Galileo, BeiDou and QZSS time scales differ by tens of ns, and
+receivers add their own inter-system biases).  Corrections: broadcast satellite clock with the
+relativistic term and the signal's group delay, Saastamoinen troposphere, optionally Klobuchar.
+Integrity: a chi-square test of the weighted residuals, and when it fails the single satellite
+whose exclusion passes best is left out (RAIM fault detection and exclusion).
+
+Bad input never raises: `solve_spp` returns a result with `ok=False` and a message.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import NamedTuple, Sequence
+
+import numpy as np
+
+from augnet.gnss.constants import OMEGA_E_GPS_RAD_S, SPEED_OF_LIGHT_M_S
+from augnet.gnss.ephemeris import NavigationData, group_delay_s, satellite_state
+from augnet.gnss.geometry import azimuth_elevation, ecef_to_geodetic
+from augnet.gnss.signals import FREQ_L1_HZ
+from augnet.onboard.atmosphere import klobuchar_l1_m, saastamoinen_m
+from augnet.onboard.observations import BAND_FREQ_HZ, EpochObs
+
+SPP_MAX_ITERATIONS = 10
+SPP_CONVERGED_M = 1e-4
+# Before the position is known (first iterations from the Earth's centre) no elevation exists;
+# the mask and the atmosphere apply once the estimate is this close to the surface.
+NEAR_SURFACE_RADIUS_M = 6.0e6
+# Code noise model sigma^2 = a^2 + b^2 / sin^2(el): 0.3 m each (RTKLIB's 0.003 m phase x 100).
+CODE_SIGMA_A_M = 0.3
+CODE_SIGMA_B_M = 0.3
+# Klobuchar corrects about half the ionospheric delay (IS-GPS-200 20.3.3.5.2.5): its error sigma
+# is taken as half the correction; without it the whole delay (~5 m at zenith) is error.
+KLOBUCHAR_ERROR_FRACTION = 0.5
+UNMODELLED_IONO_SIGMA_M = 5.0
+TROPO_MODEL_SIGMA_M = 0.3  # Saastamoinen with a standard atmosphere, at zenith (scaled by 1/sin el)
+# RAIM: false-alarm probability of the chi-square residual test.
+RAIM_FALSE_ALARM = 1e-3
+# A position this far from the Earth's surface is not a receiver on the ground or in a train.
+MAX_PLAUSIBLE_HEIGHT_M = 1.0e5
+MIN_PLAUSIBLE_HEIGHT_M = -1.0e3
+# Residuals beyond this [m] after convergence mean a blunder (wrong ephemeris, corrupt code).
+GROSS_RESIDUAL_M = 1.0e3
+
+
+def chi2_quantile(dof: int, p_false_alarm: float = RAIM_FALSE_ALARM) -> float:
+    """Upper quantile of the chi-square distribution (Wilson-Hilferty approximation, good to ~1%)."""
+    if dof <= 0:
+        return math.inf
+    z = _normal_quantile(1.0 - p_false_alarm)
+    a = 2.0 / (9.0 * dof)
+    return dof * (1.0 - a + z * math.sqrt(a)) ** 3
+
+
+def _normal_quantile(p: float) -> float:
+    # Acklam's rational approximation is overkill here; bisection on erf is exact enough and short.
+    lo, hi = -10.0, 10.0
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        if 0.5 * (1.0 + math.erf(mid / math.sqrt(2.0))) < p:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+class SatPositions(NamedTuple):
+    position_m: np.ndarray  # (N, 3) ECEF at transmission (frame of transmission time)
+    velocity_m_s: np.ndarray  # (N, 3)
+    clock_s: np.ndarray  # (N,) satellite clock bias incl. relativity, no group delay
+    clock_drift_s_s: np.ndarray
+    ephemeris_index: np.ndarray  # (N,) row in nav.table, -1 where none
+    valid: np.ndarray  # (N,) bool
+    accuracy_m: np.ndarray  # (N,) broadcast URA/SISA
+
+
+def satellite_positions(nav: NavigationData, sats: Sequence[str], t_obs: float, pseudorange_m) -> SatPositions:
+    """Satellite states at signal transmission, from the receiver time tag and the pseudorange.
+
+    t_tx = t_obs - P/c - dt_sat: the receiver clock error is inside P, so it need not be known
+    (the same approach as every RINEX post-processor).  Ephemerides are selected at t_obs so base
+    and rover of the same epoch use the same issue of data.
+    """
+    sats = list(sats)
+    n = len(sats)
+    pr = np.asarray(pseudorange_m, dtype=float)
+    if n == 0 or len(nav) == 0:
+        z = np.zeros((n, 3))
+        return SatPositions(z, z, np.zeros(n), np.zeros(n), np.full(n, -1), np.zeros(n, bool), np.zeros(n))
+    idx = nav.select(sats, t_obs)
+    valid = (idx >= 0) & np.isfinite(pr)
+    rows = nav.table.take(np.where(valid, idx, 0))
+    t = np.full(n, float(t_obs))
+    tau = np.where(np.isfinite(pr), pr, 0.0) / SPEED_OF_LIGHT_M_S
+    st = satellite_state(rows, t, -tau)
+    st = satellite_state(rows, t, -(tau + st.clock_bias_s))
+    pos = np.where(valid[:, None], st.position_m, np.nan)
+    vel = np.where(valid[:, None], st.velocity_m_s, np.nan)
+    acc = np.where(valid, rows.accuracy_m, np.nan)
+    return SatPositions(pos, vel, np.where(valid, st.clock_bias_s, np.nan),
+                        np.where(valid, st.clock_drift_s_s, np.nan), np.where(valid, idx, -1), valid, acc)
+
+
+def geometric_range(sat_pos_m, rx_m):
+    """(range [m] incl. Sagnac, unit line-of-sight receiver->satellite (N, 3))."""
+    d = sat_pos_m - rx_m
+    r = np.linalg.norm(d, axis=-1)
+    sagnac = OMEGA_E_GPS_RAD_S * (sat_pos_m[..., 0] * rx_m[1] - sat_pos_m[..., 1] * rx_m[0]) / SPEED_OF_LIGHT_M_S
+    return r + sagnac, d / r[..., None]
+
+
+@dataclass
+class SppOptions:
+    elevation_mask_rad: float = math.radians(10.0)
+    ionosphere: str = "klobuchar"  # 'klobuchar' or 'off'
+    klobuchar_alpha: Sequence[float] | None = None
+    klobuchar_beta: Sequence[float] | None = None
+    troposphere: bool = True
+    raim: bool = True
+    systems: Sequence[str] = ("G", "E", "C", "J")
+
+
+@dataclass
+class SppResult:
+    ok: bool
+    time: float
+    position_m: np.ndarray  # (3,) ECEF, NaN when not ok
+    clocks_m: dict[str, float] = field(default_factory=dict)  # receiver clock per system [m]
+    covariance_m2: np.ndarray = field(default_factory=lambda: np.full((3, 3), np.nan))
+    used: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # mask over the epoch's sats
+    residuals_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    excluded: list[str] = field(default_factory=list)  # satellites RAIM left out
+    gdop: float = math.nan
+    chi2: float = math.nan
+    message: str = ""
+
+    @property
+    def n_used(self) -> int:
+        return int(np.count_nonzero(self.used))
+
+
+def _fail(t, n, msg) -> SppResult:
+    return SppResult(False, t, np.full(3, np.nan), used=np.zeros(n, bool), residuals_m=np.full(n, np.nan), message=msg)
+
+
+def solve_spp(obs: EpochObs, nav: NavigationData, options: SppOptions | None = None,
+              initial_m=None) -> SppResult:
+    """Position and per-system clocks from slot-0 pseudoranges of one epoch.  Never raises on data."""
+    opt = options or SppOptions()
+    n = len(obs.sats)
+    try:
+        return _solve(obs, nav, opt, initial_m)
+    except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:  # defensive: bad numbers
+        return _fail(obs.time, n, f"SPP failed: {exc}")
+
+
+def _solve(obs: EpochObs, nav: NavigationData, opt: SppOptions, initial_m) -> SppResult:
+    n = len(obs.sats)
+    if n == 0:
+        return _fail(obs.time, n, "no observations")
+    sys_ = np.array([s[0] for s in obs.sats])
+    pr = obs.code_m[:, 0].copy()
+    usable = np.isfinite(pr) & np.isin(sys_, list(opt.systems)) & (pr > 1.0e7) & (pr < 6.0e7)
+    sp = satellite_positions(nav, obs.sats, obs.time, np.where(usable, pr, np.nan))
+    usable &= sp.valid
+    # group delay of the slot-0 signal (TGD, BGD); unknown signals get none
+    tgd = np.zeros(n)
+    if np.any(sp.valid):
+        rows = nav.table.take(np.where(sp.valid, sp.ephemeris_index, 0))
+        for sig in np.unique(obs.signal[:, 0]):
+            if sig:
+                m = obs.signal[:, 0] == sig
+                gd = group_delay_s(rows, sig)
+                tgd = np.where(m & np.isfinite(gd), gd, tgd)
+    freq0 = np.array([BAND_FREQ_HZ.get((s[0], sig[:1]), FREQ_L1_HZ) if sig else FREQ_L1_HZ
+                      for s, sig in zip(obs.sats, obs.signal[:, 0])])
+    iono_scale = (FREQ_L1_HZ / freq0) ** 2
+    alpha = opt.klobuchar_alpha
+    beta = opt.klobuchar_beta
+
+    x = np.zeros(3) if initial_m is None or not np.all(np.isfinite(initial_m)) else np.array(initial_m, float)
+    excluded: list[str] = []
+    exclude_mask = np.zeros(n, bool)
+    for _raim_round in range(3):
+        res = _iterate(obs, sp, pr, tgd, iono_scale, usable & ~exclude_mask, sys_, x, opt, alpha, beta)
+        if not res.ok or not opt.raim:
+            break
+        dof = res.n_used - 3 - len(res.clocks_m)
+        if dof <= 0 or res.chi2 <= chi2_quantile(dof):
+            break
+        # exclusion: try each used satellite, keep the best passing solution
+        best = None
+        for j in np.flatnonzero(res.used):
+            m = exclude_mask.copy()
+            m[j] = True
+            r = _iterate(obs, sp, pr, tgd, iono_scale, usable & ~m, sys_, res.position_m, opt, alpha, beta)
+            if r.ok:
+                d = r.n_used - 3 - len(r.clocks_m)
+                if d > 0 and (best is None or r.chi2 / chi2_quantile(d) < best[1]):
+                    best = (j, r.chi2 / chi2_quantile(d), r)
+        if best is None:
+            res.message = "RAIM: residual test failed, no exclusion possible"
+            break
+        exclude_mask[best[0]] = True
+        excluded.append(str(obs.sats[best[0]]))
+        res = best[2]
+        if best[1] <= 1.0:
+            break
+    res.excluded = excluded
+    if res.ok and excluded and not res.message:
+        res.message = f"RAIM excluded {','.join(excluded)}"
+    return res
+
+
+def _iterate(obs, sp, pr, tgd, iono_scale, usable, sys_, x0, opt, alpha, beta) -> SppResult:
+    n = len(obs.sats)
+    x = np.array(x0, dtype=float)
+    clocks: dict[str, float] = {}
+    for it in range(SPP_MAX_ITERATIONS):
+        near = np.linalg.norm(x) > NEAR_SURFACE_RADIUS_M
+        rng, los = geometric_range(np.where(usable[:, None], sp.position_m, 0.0), x)
+        use = usable.copy()
+        var = np.full(n, np.inf)
+        corr = np.zeros(n)
+        if near:
+            llh = ecef_to_geodetic(x)
+            az, el = azimuth_elevation(x, np.where(usable[:, None], sp.position_m, x + 1.0))
+            use &= el >= opt.elevation_mask_rad
+            sin_el = np.maximum(np.sin(el), 0.05)
+            var = CODE_SIGMA_A_M**2 + CODE_SIGMA_B_M**2 / sin_el**2
+            if opt.troposphere:
+                corr += saastamoinen_m(llh[0], llh[2], el)
+                var = var + (TROPO_MODEL_SIGMA_M / (sin_el + 0.1)) ** 2
+            if opt.ionosphere == "klobuchar":
+                from augnet.onboard.atmosphere import KLOBUCHAR_DEFAULT_ALPHA, KLOBUCHAR_DEFAULT_BETA
+                iono = klobuchar_l1_m(obs.time, llh[0], llh[1], az, el,
+                                      alpha or KLOBUCHAR_DEFAULT_ALPHA, beta or KLOBUCHAR_DEFAULT_BETA) * iono_scale
+                corr += iono
+                var = var + (KLOBUCHAR_ERROR_FRACTION * iono) ** 2
+            else:
+                var = var + (UNMODELLED_IONO_SIGMA_M * iono_scale / sin_el) ** 2
+            var = var + np.nan_to_num(sp.accuracy_m, nan=10.0) ** 2
+        else:
+            var = np.full(n, 100.0)
+        systems = [s for s in ("G", "E", "C", "J") if np.any(use & (sys_ == s))]
+        n_unk = 3 + len(systems)
+        if np.count_nonzero(use) < n_unk:
+            return _fail(obs.time, n, f"too few satellites ({int(np.count_nonzero(use))}) for {n_unk} unknowns")
+        idx = np.flatnonzero(use)
+        H = np.zeros((len(idx), n_unk))
+        H[:, :3] = -los[idx]
+        for k, s in enumerate(systems):
+            H[:, 3 + k] = (sys_[idx] == s)
+        clk = np.array([clocks.get(s, 0.0) for s in systems])
+        pred = rng[idx] + H[:, 3:] @ clk - SPEED_OF_LIGHT_M_S * (sp.clock_s[idx] - tgd[idx]) + corr[idx]
+        v = pr[idx] - pred
+        w = 1.0 / var[idx]
+        A = H.T @ (H * w[:, None])
+        try:
+            Q = np.linalg.inv(A)
+        except np.linalg.LinAlgError:
+            return _fail(obs.time, n, "singular geometry")
+        dx = Q @ (H.T @ (w * v))
+        x = x + dx[:3]
+        clk = clk + dx[3:]
+        clocks = {s: float(c) for s, c in zip(systems, clk)}
+        if np.linalg.norm(dx[:3]) < SPP_CONVERGED_M and near:
+            break
+    else:
+        return _fail(obs.time, n, "SPP did not converge")
+    # residuals after the last update
+    rng, _ = geometric_range(np.where(usable[:, None], sp.position_m, 0.0), x)
+    pred = rng[idx] + H[:, 3:] @ clk - SPEED_OF_LIGHT_M_S * (sp.clock_s[idx] - tgd[idx]) + corr[idx]
+    v = pr[idx] - pred
+    resid = np.full(n, np.nan)
+    resid[idx] = v
+    llh = ecef_to_geodetic(x)
+    if not (MIN_PLAUSIBLE_HEIGHT_M < llh[2] < MAX_PLAUSIBLE_HEIGHT_M):
+        return SppResult(False, obs.time, np.full(3, np.nan), used=use, residuals_m=resid,
+                         message=f"implausible height {llh[2]:.0f} m")
+    chi2 = float(np.sum(v**2 * w))
+    gdop = float(np.sqrt(np.trace(np.linalg.inv(H.T @ H))))
+    res = SppResult(True, obs.time, x, clocks, Q[:3, :3], use, resid, [], gdop, chi2, "")
+    if np.any(np.abs(v) > GROSS_RESIDUAL_M):
+        res.chi2 = math.inf  # forces RAIM exclusion of the blunder
+    return res
