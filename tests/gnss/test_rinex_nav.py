@@ -107,3 +107,21 @@ def test_rinex2_gps_nav_gzip(shared_data):
     # A record timed in the previous year (2020-12-31 23:59:44) lands in the same GPS week.
     g07 = next(e for e in nav if e.sat == "G07")
     assert g07.toc == 431984.0 and g07.toe == 431984.0
+
+
+def test_week_comes_from_the_toc_epoch_not_the_week_field(tmp_path):
+    """Some writers put the GST week (not the GPS-aligned one) in Galileo records, old GPS files a
+    10-bit week: the toc calendar epoch fixes the week either way."""
+    e = Ephemeris(system="E", prn=5, week=1246, toe=172800.0, toc=172800.0, af0=1e-4, af1=0.0, af2=0.0,
+                  iode=30, crs=1.0, delta_n=3e-9, m0=0.1, cuc=1e-6, e=1e-4, cus=1e-6, sqrt_a=5440.6,
+                  cic=1e-8, omega0=1.0, cis=1e-8, i0=0.97, crc=100.0, omega=0.5, omega_dot=-5e-9,
+                  idot=1e-10, data_sources=517)
+    g = e.replace(system="G", week=2270, data_sources=0)
+    write_nav(tmp_path / "a.nav", [e, g])
+    lines = (tmp_path / "a.nav").read_text().splitlines()
+    hits = [k for k, line in enumerate(lines) if "2.270000000000E+03" in line]
+    assert len(hits) == 2  # orbit line 5 of each record
+    lines[hits[0]] = lines[hits[0]].replace("2.270000000000E+03", "1.246000000000E+03")  # GST week
+    lines[hits[1]] = lines[hits[1]].replace("2.270000000000E+03", "2.220000000000E+02")  # 2270 mod 1024
+    (tmp_path / "b.nav").write_text("\n".join(lines) + "\n")
+    assert read_nav(tmp_path / "b.nav").ephemerides == [e, g]

@@ -232,18 +232,16 @@ def _ephemeris_from_fields(system: str, prn: int, toc_label: float, d: list[floa
     # d[] indices follow the RINEX order: 0-2 clock, 3-6 orbit 1, ..., 27-30 orbit 7.
     if d[10] <= 0.0:
         raise RinexError(path, line_no + 2, f"{system}{prn:02d}: sqrt(A) must be positive, got {d[10]}")
-    week_file = int(round(d[21]))
     if system == "C":
-        week = week_file  # BDT week
-        toc_week_seconds = toc_label - BDS_WEEK_OFFSET_FROM_GPS * SECONDS_PER_WEEK
+        toc_week_seconds = toc_label - BDS_WEEK_OFFSET_FROM_GPS * SECONDS_PER_WEEK  # BDT weeks
     elif system == "E":
-        week = week_file - GAL_WEEK_OFFSET_FROM_GPS  # RINEX carries Galileo weeks aligned to GPS weeks
-        toc_week_seconds = toc_label - GAL_WEEK_OFFSET_FROM_GPS * SECONDS_PER_WEEK
+        toc_week_seconds = toc_label - GAL_WEEK_OFFSET_FROM_GPS * SECONDS_PER_WEEK  # GST weeks
     else:
-        week = week_file
         toc_week_seconds = toc_label
-    # Stored as broadcast: seconds of week in [0, 604800); Ephemeris.toc_gpst puts it in the week
-    # nearest toe (toc and toe can straddle a week roll-over).
+    # The week of toe: the one that puts toe within half a week of the toc epoch.  Derived from
+    # the calendar, not the week field: writers disagree on Galileo's (GPS-aligned per RINEX 3,
+    # GST in some files) and GPS 10-bit roll-overs appear in old ones.  RTKLIB does the same.
+    week = int(round((toc_week_seconds - d[11]) / SECONDS_PER_WEEK))
     toc = float((toc_week_seconds - week * SECONDS_PER_WEEK) % SECONDS_PER_WEEK)
     common = dict(
         system=system, prn=prn, week=week, toe=d[11], toc=toc, af0=d[0], af1=d[1], af2=d[2],
