@@ -8,7 +8,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from augnet.gnss.rtcm import Observables, RtcmMessage, encode_frame, observables_to_msm
+from augnet.gnss.rtcm import RtcmMessage, encode_frame, observables_to_msm
 from augnet.gnss.rtcm.observables import RANGE_MS_M
 from tests.conftest import require_tool
 

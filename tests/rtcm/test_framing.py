@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import random
 
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -15,8 +16,6 @@ from augnet.gnss.rtcm.framing import (
     frame,
     read_frames,
 )
-
-import pytest
 
 # Frames built from arbitrary payloads that start with a plausible 12-bit message number.
 payloads = st.binary(min_size=2, max_size=300)

@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from augnet.gnss.rtcm.errors import DecodeError, EncodeError
-from augnet.gnss.rtcm.fields import FIELDS, Kind, decode_raw, encode_raw, from_value, to_value
+from augnet.gnss.rtcm.fields import FIELDS, decode_raw, encode_raw, from_value, to_value
 from augnet.gnss.rtcm.framing import Frame, RtcmStreamReader, frame, message_type
 from augnet.gnss.rtcm.layouts import LAYOUTS, Repeat, msm_kind
 from augnet.gnss.rtcm.msm import MsmMessage, decode_msm, encode_msm, msm_from_fields
@@ -192,6 +192,6 @@ class MessageReader:
 
 __all__ = [
     "MessageReader",
-    "DecodeError", "EncodeError", "Kind", "Message", "MsmMessage", "RtcmMessage", "UnknownMessage",
+    "DecodeError", "EncodeError", "Message", "MsmMessage", "RtcmMessage", "UnknownMessage",
     "decode", "decode_fixed", "encode", "encode_fixed", "encode_frame", "text_fields",
 ]
