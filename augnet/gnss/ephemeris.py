@@ -327,8 +327,10 @@ def group_delay_s(table: EphemerisTable, rinex_code: str) -> np.ndarray:
 
     pseudorange(signal) = geometric range + c (dt_rx - clock_bias + group_delay).  Sign and scaling:
       GPS/QZSS LNAV: L1 P/C/A +TGD, L2 +(f1/f2)^2 TGD (IS-GPS-200 20.3.3.3.3.2); L5 needs CNAV ISCs.
-      Galileo: E1 +BGD(E1,E5b) for an I/NAV clock, +BGD(E1,E5a) for F/NAV; E5a +(f1/f5a)^2 BGD(E1,E5a);
-        E5b +(f1/f5b)^2 BGD(E1,E5b) (OS SIS ICD 5.1.5).
+      Galileo (OS SIS ICD 5.1.5): the clock refers to the E1/E5b ionosphere-free pair for I/NAV,
+        E1/E5a for F/NAV; with BGD_clk the BGD of that pair, E1 +BGD_clk, E5a
+        +(g_a - 1) BGD(E1,E5a) + BGD_clk, E5b +(g_b - 1) BGD(E1,E5b) + BGD_clk, g_x = (f1/fx)^2
+        (E5a with an F/NAV clock reduces to the ICD's g_a BGD(E1,E5a); likewise E5b with I/NAV).
       BDS (clock refers to B3I): B1I +TGD1, B2I +TGD2, B3I 0 (BDS-SIS-ICD-B1I 5.2.4.10).
     Signals the broadcast set does not describe give NaN.
     `rinex_code` is the two-character RINEX code ('1C', '2I', ...), applied to every row's system.
@@ -347,12 +349,16 @@ def group_delay_s(table: EphemerisTable, rinex_code: str) -> np.ndarray:
         out = np.where(sysl == "C", 0.0, out)
     elif band == "7":
         out = np.where(sysl == "C", c["tgd2"], out)
-        out = np.where(sysl == "E", (FREQ_L1_HZ / FREQ_E5B_HZ) ** 2 * c["bgd_e5b_e1"], out)
-    elif band == "5":
-        out = np.where(sysl == "E", (FREQ_L1_HZ / FREQ_L5_HZ) ** 2 * c["bgd_e5a_e1"], out)
-    if band == "1":
+    gal = sysl == "E"
+    if gal.any():
         fnav = (c["data_sources"].astype(np.int64) & GAL_CLOCK_E5A_E1) != 0
-        out = np.where(sysl == "E", np.where(fnav, c["bgd_e5a_e1"], c["bgd_e5b_e1"]), out)
+        bgd_clk = np.where(fnav, c["bgd_e5a_e1"], c["bgd_e5b_e1"])
+        if band == "1":
+            out = np.where(gal, bgd_clk, out)
+        elif band == "5":
+            out = np.where(gal, ((FREQ_L1_HZ / FREQ_L5_HZ) ** 2 - 1.0) * c["bgd_e5a_e1"] + bgd_clk, out)
+        elif band == "7":
+            out = np.where(gal, ((FREQ_L1_HZ / FREQ_E5B_HZ) ** 2 - 1.0) * c["bgd_e5b_e1"] + bgd_clk, out)
     return out
 
 

@@ -157,9 +157,24 @@ def test_group_delays():
     l1 = group_delay_s(tb, "1C")
     assert l1[0] == G01.tgd and l1[1] == -2.0e-9 and l1[2] == -1.0e-9 and np.isnan(l1[3])
     assert np.isclose(group_delay_s(tb, "2W")[0], (FREQ_L1_HZ / FREQ_L2_HZ) ** 2 * G01.tgd)
+    g_a, g_b = (FREQ_L1_HZ / FREQ_L5_HZ) ** 2, (FREQ_L1_HZ / FREQ_E5B_HZ) ** 2
     e5a = group_delay_s(tb, "5Q")
-    assert np.isnan(e5a[0]) and np.isclose(e5a[2], (FREQ_L1_HZ / FREQ_L5_HZ) ** 2 * -1.0e-9)
-    assert np.isclose(group_delay_s(tb, "7Q")[1], (FREQ_L1_HZ / FREQ_E5B_HZ) ** 2 * -2.0e-9)
+    # The ICD cases: E5a with the F/NAV clock, E5b with the I/NAV clock.
+    assert np.isnan(e5a[0]) and np.isclose(e5a[2], g_a * -1.0e-9)
+    assert np.isclose(group_delay_s(tb, "7Q")[1], g_b * -2.0e-9)
+    # The cross cases follow from the same three signal delays: the ionosphere-free combination
+    # of each pair, formed with these group delays, must equal that pair's clock (delay 0).
+    # The other pair's combination is off by the offset between the two clocks,
+    # BGD(E1,E5b) - BGD(E1,E5a) = -1 ns (I/NAV clock) or +1 ns (F/NAV clock).
+    bgd_a, bgd_b = -1.0e-9, -2.0e-9
+    for row, own_offset in ((1, 0.0), (2, 0.0)):
+        d1, d5, d7 = (group_delay_s(tb, code)[row] for code in ("1C", "5Q", "7Q"))
+        if_a = (g_a * d1 - d5) / (g_a - 1.0)
+        if_b = (g_b * d1 - d7) / (g_b - 1.0)
+        if row == 1:  # I/NAV clock = the E1/E5b combination
+            assert abs(if_b - own_offset) < 1e-20 and np.isclose(if_a, bgd_b - bgd_a, rtol=0, atol=1e-20)
+        else:  # F/NAV clock = the E1/E5a combination
+            assert abs(if_a - own_offset) < 1e-20 and np.isclose(if_b, bgd_a - bgd_b, rtol=0, atol=1e-20)
     assert group_delay_s(tb, "2I")[3] == 3e-9
     assert group_delay_s(tb, "7I")[3] == -4e-9
     assert group_delay_s(tb, "6I")[3] == 0.0
