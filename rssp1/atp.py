@@ -1,11 +1,13 @@
 """Onboard -> ATP: virtual balise telegrams over RSSP-I, the onboard library end and an ATP simulator.
 
 The onboard positioning core calls `OnboardAtpLink.report_balise(...)` when the train's estimated
-position passes a virtual balise group of the track map. Each telegram carries a sequence number and is
-sent every cycle until the ATP acknowledges it (an RbcAck message whose last_report_seq is the highest
-telegram sequence taken) or it is older than `max_age_s` (a stale passage is worse than none: it is
-dropped and counted). So a passage survives lost RSDs and even an RSSP-I resynchronisation. The ATP
-deduplicates on the sequence number. Between passages both ends still send an RSD every cycle.
+position passes a virtual balise group of the track map. Each telegram carries a 32-bit id and is sent
+every cycle until the ATP acknowledges that id (RbcAck.alarm_ids lists the ids it received) or it is
+older than `max_age_s` (a stale passage is worse than none: it is dropped and counted). So a passage
+survives lost RSDs and even an RSSP-I resynchronisation. The ATP deduplicates on the id. Ids count up
+from a random start, so after an onboard restart neither a stale acknowledgement nor the ATP's
+duplicate filter can mistake a new passage for an old one (chance 2**-32 per id). Between passages
+both ends still send an RSD every cycle.
 
 The ATP simulator checks every telegram against its own copy of the balise map (group known, same
 track and chainage), that passages follow the direction of travel, and that the onboard integrity is
@@ -14,7 +16,8 @@ usable; anything else is counted and, when it matters for safety, raised as an a
 
 from __future__ import annotations
 
-from collections import Counter
+import secrets
+from collections import Counter, OrderedDict
 from dataclasses import dataclass
 
 from rssp1.endpoint import DataReceived, LinkDown
@@ -30,6 +33,8 @@ from rssp1.messages import (
 
 TELEGRAM_MAX_AGE_S = 5.0  # an unacknowledged passage older than this is dropped (train moved ~100 m+)
 MAX_TELEGRAMS_PER_CYCLE = 16
+RECENT_IDS = 256  # telegram ids the ATP remembers for deduplication (minutes of passages)
+ACKED_IDS_PER_CYCLE = MAX_TELEGRAMS_PER_CYCLE  # so one ack covers everything one cycle can carry
 
 
 @dataclass(frozen=True)
@@ -39,11 +44,13 @@ class BaliseLocation:
 
 
 class OnboardAtpLink:
-    def __init__(self, endpoint, train_id: int, *, max_age_s: float = TELEGRAM_MAX_AGE_S) -> None:
+    def __init__(
+        self, endpoint, train_id: int, *, max_age_s: float = TELEGRAM_MAX_AGE_S, first_id: int | None = None
+    ) -> None:
         self.endpoint = endpoint
         self.train_id = train_id
         self.max_age_s = max_age_s
-        self._seq = 0
+        self._next_id = secrets.randbits(32) if first_id is None else first_id & 0xFFFFFFFF
         self._pending: list[tuple[VirtualBaliseTelegram, float | None]] = []  # (telegram, first sent at)
         self.stats: Counter[str] = Counter()
 
@@ -51,11 +58,11 @@ class OnboardAtpLink:
         self, *, time_ms: int, balise_group: int, location: BaliseLocation, reverse: bool,
         confidence_mm: int, speed_mm_s: int, integrity: SectionStatus = SectionStatus.OK,
     ) -> VirtualBaliseTelegram:
-        self._seq = (self._seq + 1) & 0xFFFF
         telegram = VirtualBaliseTelegram(
             time_ms, self.train_id, balise_group, location.track_id, location.chainage_mm, reverse,
-            confidence_mm, speed_mm_s, SectionStatus(integrity), self._seq,
+            confidence_mm, speed_mm_s, SectionStatus(integrity), self._next_id,
         )
+        self._next_id = (self._next_id + 1) & 0xFFFFFFFF
         self._pending.append((telegram, None))
         self.stats["telegrams"] += 1
         return telegram
@@ -81,10 +88,9 @@ class OnboardAtpLink:
             if isinstance(event, DataReceived):
                 for msg in decode_payload(event.data, self.stats).messages:
                     if isinstance(msg, RbcAck):
-                        acked = msg.last_report_seq & 0xFFFF
+                        acked = set(msg.alarm_ids)
                         before = len(self._pending)
-                        # serial-number arithmetic on the u16 sequence: acked covers everything up to it
-                        self._pending = [(t, f) for t, f in self._pending if ((acked - t.seq) & 0xFFFF) >= 0x8000]
+                        self._pending = [(t, f) for t, f in self._pending if t.telegram_id not in acked]
                         self.stats["acked"] += before - len(self._pending)
 
     @property
@@ -107,7 +113,7 @@ class AtpSimulator:
         self.alarms: list[AtpEvent] = []
         self.stats: Counter[str] = Counter()
         self.now_s = 0.0
-        self._last_seq: dict[int, int] = {}  # train -> last telegram seq
+        self._recent_ids: OrderedDict[int, None] = OrderedDict()  # telegram ids received, oldest first
         self._last_chainage: dict[int, tuple[int, int, bool]] = {}  # train -> (track, chainage, reverse)
 
     def receive(self, datagram: bytes, now_s: float | None = None) -> None:
@@ -128,11 +134,14 @@ class AtpSimulator:
         self.stats[f"alarm_{kind.lower()}"] += 1
 
     def _telegram(self, t: VirtualBaliseTelegram) -> None:
-        last = self._last_seq.get(t.train_id)
-        if last is not None and ((delta := (t.seq - last) & 0xFFFF) == 0 or delta >= 0x8000):
-            self.stats["duplicate"] += 1  # the repeats of a passage already taken
+        key = t.telegram_id
+        if key in self._recent_ids:
+            self._recent_ids.move_to_end(key)  # acknowledge it again: our last ack may have been lost
+            self.stats["duplicate"] += 1  # a repeat of a telegram already received
             return
-        self._last_seq[t.train_id] = t.seq
+        self._recent_ids[key] = None
+        if len(self._recent_ids) > RECENT_IDS:
+            self._recent_ids.popitem(last=False)
         where = self.balise_map.get(t.balise_group)
         if where is None:
             self.stats["unknown_balise"] += 1
@@ -157,9 +166,8 @@ class AtpSimulator:
 
     def cycle(self, now_s: float) -> list[bytes]:
         self.now_s = now_s
-        # one ATP link serves one train: acknowledge the highest telegram sequence taken
-        acked = max(self._last_seq.values(), default=0)
-        frames, events = self.endpoint.cycle(encode_message(RbcAck(acked, ())))
+        acked = tuple(list(self._recent_ids)[-ACKED_IDS_PER_CYCLE:])
+        frames, events = self.endpoint.cycle(encode_message(RbcAck(len(self.passages) & 0xFFFFFFFF, acked)))
         for event in events:
             if isinstance(event, LinkDown):
                 self._alarm(AlarmCode.LINK_LOST.name)

@@ -96,8 +96,8 @@ class Alarm:
 
 @dataclass(frozen=True)
 class RbcAck:
-    """Acknowledgement back along a link: RBC -> centre (report seq, alarm ids), ATP -> onboard
-    (last_report_seq = highest virtual balise telegram sequence taken)."""
+    """Acknowledgement back along a link: RBC -> centre (last report seq, ids of alarms received),
+    ATP -> onboard (alarm_ids = ids of the virtual balise telegrams received)."""
 
     last_report_seq: int
     alarm_ids: tuple[int, ...]
@@ -116,7 +116,7 @@ class VirtualBaliseTelegram:
     confidence_mm: int  # along-track protection level at the passage
     speed_mm_s: int
     integrity: SectionStatus
-    seq: int
+    telegram_id: int  # u32, unique per passage across onboard restarts (random start); acked by id
 
 
 Message = IntegrityStatus | Exclusions | CorrectionAge | Alarm | RbcAck | VirtualBaliseTelegram
@@ -132,7 +132,7 @@ _AGE_FIXED = struct.Struct("<QII")
 _ALARM_FIXED = struct.Struct("<QIHBHB")  # epoch_ms, alarm_id, code, severity, section_id, text length
 _ACK_FIXED = struct.Struct("<IB")  # last_report_seq, n_alarm_ids
 _ACK_ITEM = struct.Struct("<I")
-_BALISE_FIXED = struct.Struct("<QIIHQBIIBH")
+_BALISE_FIXED = struct.Struct("<QIIHQBIIBI")
 
 MESSAGE_LAYOUTS: dict[MessageType, tuple[struct.Struct, struct.Struct | None]] = {
     MessageType.INTEGRITY_STATUS: (_INTEGRITY_FIXED, _INTEGRITY_ITEM),
@@ -182,7 +182,7 @@ def encode_message(msg: Message) -> bytes:
     if isinstance(msg, VirtualBaliseTelegram):
         body = _BALISE_FIXED.pack(
             msg.time_ms, msg.train_id, msg.balise_group, msg.track_id, msg.chainage_mm, int(msg.reverse),
-            msg.confidence_mm, msg.speed_mm_s, int(msg.integrity), msg.seq,
+            msg.confidence_mm, msg.speed_mm_s, int(msg.integrity), msg.telegram_id,
         )
         return _frame(MessageType.VIRTUAL_BALISE, body)
     raise TypeError(f"not a message: {msg!r}")
@@ -251,11 +251,11 @@ def decode_message(msg_type: int, body: bytes) -> Message:
         _exact(rest, n * _ACK_ITEM.size, kind.name)
         return RbcAck(last, tuple(_ACK_ITEM.unpack_from(rest, 4 * i)[0] for i in range(n)))
     _exact(rest, 0, kind.name)
-    t, train, group, track, chainage, reverse, conf, speed, integrity, seq = values
+    t, train, group, track, chainage, reverse, conf, speed, integrity, telegram_id = values
     if reverse not in (0, 1):
         raise MessageError("value", f"direction {reverse}")
     return VirtualBaliseTelegram(
-        t, train, group, track, chainage, bool(reverse), conf, speed, _enum(SectionStatus, integrity, "integrity"), seq
+        t, train, group, track, chainage, bool(reverse), conf, speed, _enum(SectionStatus, integrity, "integrity"), telegram_id
     )
 
 

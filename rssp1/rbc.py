@@ -23,7 +23,8 @@ is DO_NOT_USE and an alarm is raised once per episode.
 from __future__ import annotations
 
 import itertools
-from collections import Counter
+import secrets
+from collections import Counter, OrderedDict
 from dataclasses import dataclass, field
 from typing import Iterable
 
@@ -50,6 +51,7 @@ DEFAULT_MAX_CORRECTION_AGE_S = 10.0  # RTK corrections older than ~10 s lose cm-
 AGE_UNKNOWN_MS = 0xFFFFFFFF  # no correction model yet
 MAX_ALARMS_PER_CYCLE = 8  # unacknowledged alarms carried per RSD; the rest wait their turn
 MAX_ACKED_IDS = 16  # alarm ids an RbcAck carries (the most recent)
+RECENT_ALARM_IDS = 1024  # alarm ids the RBC remembers for deduplication
 
 
 def _ms(seconds: float) -> int:
@@ -59,7 +61,9 @@ def _ms(seconds: float) -> int:
 class CentreRbcLink:
     """The control centre's end of the RSSP-I link to an RBC / train-control resource manager."""
 
-    def __init__(self, endpoint, *, max_correction_age_s: float = DEFAULT_MAX_CORRECTION_AGE_S) -> None:
+    def __init__(
+        self, endpoint, *, max_correction_age_s: float = DEFAULT_MAX_CORRECTION_AGE_S, first_alarm_id: int | None = None
+    ) -> None:
         self.endpoint = endpoint
         self.max_correction_age_s = max_correction_age_s
         self.sections: dict[int, SectionIntegrity] = {}
@@ -67,7 +71,9 @@ class CentreRbcLink:
         self.stations: tuple[int, ...] = ()
         self.epoch_ms = 0
         self._produced_at_s: float | None = None
-        self._alarm_ids = itertools.count(1)
+        # Ids count up from a random start: after a centre restart the RBC's duplicate filter cannot
+        # mistake a new alarm for one it already has (chance 2**-32 per id).
+        self._alarm_ids = itertools.count(secrets.randbits(32) if first_alarm_id is None else first_alarm_id)
         self.unacked: dict[int, Alarm] = {}
         self.report_seq = 0
         self.last_acked_report = -1
@@ -96,7 +102,7 @@ class CentreRbcLink:
     def raise_alarm(
         self, code: AlarmCode, severity: Severity = Severity.CRITICAL, section_id: int = NO_SECTION, text: str = ""
     ) -> int:
-        alarm_id = next(self._alarm_ids)
+        alarm_id = next(self._alarm_ids) & 0xFFFFFFFF
         self.unacked[alarm_id] = Alarm(self.epoch_ms, alarm_id, AlarmCode(code), Severity(severity), section_id, text)
         self.stats["alarms_raised"] += 1
         return alarm_id
@@ -195,7 +201,7 @@ class RbcSimulator:
         self.stats: Counter[str] = Counter()
         self.local_cycle = 0
         self.now_s = 0.0
-        self._seen_alarm_ids: dict[int, None] = {}
+        self._seen_alarm_ids: OrderedDict[int, None] = OrderedDict()
         self._episodes: set[AlarmCode] = set()  # watchdog alarms active (raised once per episode)
         self._last_report_seq = 0
 
@@ -250,8 +256,13 @@ class RbcSimulator:
                 self._watchdog(AlarmCode.CORRECTION_STALE, msg.age_ms > limit, f"corrections {msg.age_ms} ms old")
             elif isinstance(msg, Exclusions):
                 self.view.satellites, self.view.stations = msg.satellites, msg.stations
-            elif isinstance(msg, Alarm) and msg.alarm_id not in self._seen_alarm_ids:
+            elif isinstance(msg, Alarm):
+                if msg.alarm_id in self._seen_alarm_ids:
+                    self._seen_alarm_ids.move_to_end(msg.alarm_id)  # ack it again: our ack may be lost
+                    continue
                 self._seen_alarm_ids[msg.alarm_id] = None
+                if len(self._seen_alarm_ids) > RECENT_ALARM_IDS:
+                    self._seen_alarm_ids.popitem(last=False)
                 self._alarm(msg.code, msg.section_id, "centre", msg.alarm_id, msg.text)
 
     def cycle(self, now_s: float) -> list[bytes]:

@@ -362,3 +362,21 @@ def test_refresh_ssr_that_breaks_the_timestamp_chain_is_refused():
     tc_e = _decode(sse[0]).tc_e
     forged = encode_ssr(CENTRE.address, RBC.address, pair.a.tc, tc_e, (0x1234, 0x5678))
     assert pair.b.receive(forged) and pair.b.stats["dropped_ssr_inconsistent"] == 1 and pair.b.is_up
+
+
+def test_peer_restart_with_a_fresh_tc_resynchronises():
+    """The sender reboots: its TC starts again from 0 (older than the last accepted); the receiver
+    drops the 'old' frames as repeats, its DelayTime watchdog takes the link down, SSE/SSR resync."""
+    pair = LinkPair(FIELD, initial_tc=5000)
+    pair.bring_up()
+    pair.run(10)
+    pair.a = Endpoint(CENTRE, RBC, FIELD, initial_tc=0)
+    events = []
+    n = 0
+    while not pair.b.is_up or not events or downs(events) == []:
+        events += pair.step()
+        n += 1
+        assert n <= FIELD.resync_bound_cycles + 1, pair.b.stats
+    assert downs(events) == ["timeout"] and pair.b.stats["dropped_repeat"] >= FIELD.delay_time - 1
+    events = pair.run(5)
+    assert len(received(events)) == 5 and pair.b.is_up

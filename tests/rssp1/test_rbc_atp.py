@@ -196,3 +196,36 @@ def test_atp_rejects_unknown_mismatched_and_out_of_order_passages():
     kinds = [a.kind for a in atp.alarms]
     assert kinds == ["UNKNOWN_BALISE", "MAP_MISMATCH", "PASSAGE_ORDER", "INTEGRITY_LOST"]
     assert atp.stats["unknown_balise"] == atp.stats["map_mismatch"] == atp.stats["order"] == 1
+
+
+def test_onboard_restart_new_passages_are_taken_stale_acks_do_not_swallow_them():
+    onboard, atp, net = atp_pair()
+    net.step(3)
+    for group in (70_001, 70_002):
+        passage(onboard, group)
+        net.step(2)
+    assert [t.balise_group for t in atp.passages] == [70_001, 70_002]
+    # reboot: a new endpoint (TC from 0) and a new link object, whose ids start elsewhere
+    restarted = OnboardAtpLink(Endpoint(ONBOARD, ATP, TIMING, initial_tc=0), train_id=1001)
+    net.left = restarted
+    passage(restarted, 70_003)
+    net.step(TIMING.resync_bound_cycles + 4)
+    assert [t.balise_group for t in atp.passages] == [70_001, 70_002, 70_003]
+    assert restarted.pending == [] and restarted.stats["expired"] == 0
+
+
+def test_centre_restart_new_alarms_reach_the_rbc():
+    centre, rbc, net = rbc_pair()
+    centre.set_section(1, SectionStatus.OK)
+    centre.corrections_updated(1_000, produced_at_s=net.now)
+    net.step(4)
+    centre.raise_alarm(AlarmCode.OPERATOR, Severity.INFO, text="before restart")
+    net.step(3)
+    restarted = CentreRbcLink(Endpoint(CENTRE, RBC, TIMING, initial_tc=0))  # random first alarm id
+    restarted.set_section(1, SectionStatus.OK)
+    restarted.corrections_updated(2_000, produced_at_s=net.now)
+    net.left = restarted
+    restarted.raise_alarm(AlarmCode.OPERATOR, Severity.INFO, text="after restart")
+    net.step(TIMING.resync_bound_cycles + 4)
+    texts = [a.text for a in rbc.alarms if a.code is AlarmCode.OPERATOR]
+    assert texts == ["before restart", "after restart"] and restarted.unacked == {}
