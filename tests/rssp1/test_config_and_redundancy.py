@@ -7,7 +7,7 @@ import socket
 
 import pytest
 
-from rssp1.config import DeviceConfig, LinkTiming, link_config_from_mapping
+from rssp1.config import LinkTiming, link_config_from_mapping
 from rssp1.endpoint import Endpoint
 from rssp1.frames import TYPE_RSD_B, CATEGORY_STANDBY
 from rssp1.transport import EndpointNode, UdpLink

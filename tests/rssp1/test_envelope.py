@@ -5,7 +5,6 @@ from __future__ import annotations
 import pytest
 
 from rssp1 import checkword
-from rssp1.endpoint import Endpoint
 from rssp1.envelope import REPLAY_WINDOW, Keyring, Opener, SealedEndpoint, Sealer, random_link_key
 from rssp1.frames import decode_frame, encode_rsd
 from rssp1.sid_recovery import forge_rsd_svc, recover_sid
