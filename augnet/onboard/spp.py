@@ -110,6 +110,7 @@ def geometric_range(sat_pos_m, rx_m):
     """(range [m] incl. Sagnac, unit line-of-sight receiver->satellite (N, 3))."""
     d = sat_pos_m - rx_m
     r = np.linalg.norm(d, axis=-1)
+    r = np.where(r > 0.0, r, np.nan)  # a satellite at the receiver is bad data, not a division by zero
     sagnac = OMEGA_E_GPS_RAD_S * (sat_pos_m[..., 0] * rx_m[1] - sat_pos_m[..., 1] * rx_m[0]) / SPEED_OF_LIGHT_M_S
     return r + sagnac, d / r[..., None]
 

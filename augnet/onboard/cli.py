@@ -1,0 +1,85 @@
+"""`augnet rtk`: post-process RTK like RTKLIB's rnx2rtkp, writing the solution CSV (see solution.py).
+
+    augnet rtk --rover R.obs --base B.obs --nav N.nav --base-pos X,Y,Z|LAT,LON,H --out sol.csv
+
+`--base-pos header` takes the base file's APPROX POSITION.  Exit status 0 when every epoch was
+processed (whatever its status), 2 for unusable inputs.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+SYSTEM_LETTERS = "GECJ"
+
+
+def rtk(
+    rover: Annotated[Path, typer.Option("--rover", help="rover RINEX observation file")],
+    base: Annotated[Path, typer.Option("--base", help="base RINEX observation file")],
+    nav: Annotated[list[Path], typer.Option("--nav", help="RINEX 3 navigation file (repeatable)")],
+    out: Annotated[Path, typer.Option("--out", help="solution CSV to write ('-' for stdout)")],
+    base_pos: Annotated[str, typer.Option("--base-pos", help="X,Y,Z (ECEF m) or LAT,LON,H (deg, m), or 'header'")] = "header",
+    mode: Annotated[str, typer.Option("--mode", help="kinematic or static")] = "kinematic",
+    elevation_mask: Annotated[float, typer.Option("--elevation-mask", help="degrees")] = 15.0,
+    systems: Annotated[str, typer.Option("--systems", help="system letters, e.g. GEC or GEJ")] = "GECJ",
+    frequencies: Annotated[int, typer.Option("--frequencies", help="1 = L1/E1/B1I, 2 = dual, 3 = triple")] = 2,
+    ratio: Annotated[float, typer.Option("--ratio", help="ratio-test threshold")] = 3.0,
+    success_rate: Annotated[float, typer.Option("--success-rate", help="minimum bootstrapped success rate")] = 0.999,
+    max_age: Annotated[float, typer.Option("--max-age", help="maximum age of corrections [s]")] = 5.0,
+    dynamics: Annotated[bool, typer.Option("--dynamics/--no-dynamics", help="kinematic: position-velocity-acceleration model")] = False,
+    hold: Annotated[bool, typer.Option("--hold/--no-hold", help="fix-and-hold")] = True,
+) -> None:
+    """Post-process RTK: rover + base RINEX -> solution CSV (time, ECEF, geodetic, status, ratio, sigmas)."""
+    from augnet.onboard.inputs import InputError, load_nav, load_obs, parse_position
+    from augnet.onboard.postprocess import process
+    from augnet.onboard.rtk import RtkOptions
+    from augnet.onboard.solution import write_csv
+    from augnet.onboard.spp import SppOptions
+
+    if mode not in ("kinematic", "static"):
+        raise typer.BadParameter("mode must be kinematic or static", param_hint="--mode")
+    sys_ = tuple(c for c in systems.upper() if c in SYSTEM_LETTERS)
+    if not sys_:
+        raise typer.BadParameter(f"no known system among {systems!r} (use {SYSTEM_LETTERS})", param_hint="--systems")
+    if not 1 <= frequencies <= 3:
+        raise typer.BadParameter("1, 2 or 3", param_hint="--frequencies")
+    try:
+        navdata, alpha, beta = load_nav(nav)
+        rov = load_obs(rover)
+        bas = load_obs(base)
+        if base_pos.strip().lower() == "header":
+            bp = bas.approx_position_m
+            if bp is None or not 6.0e6 < float((bp**2).sum()) ** 0.5 < 7.0e6:
+                raise InputError("the base file has no usable APPROX POSITION XYZ; give --base-pos")
+        else:
+            bp = parse_position(base_pos)
+    except InputError as exc:
+        typer.echo(f"augnet rtk: {exc}", err=True)
+        raise typer.Exit(2)
+    opt = RtkOptions(
+        mode=mode, dynamics=dynamics, elevation_mask_rad=math.radians(elevation_mask), systems=sys_,
+        n_slots=frequencies, ratio_threshold=ratio, min_success_rate=success_rate, max_age_s=max_age,
+        fix_and_hold=hold,
+        spp=SppOptions(elevation_mask_rad=math.radians(min(elevation_mask, 10.0)), klobuchar_alpha=alpha,
+                       klobuchar_beta=beta, systems=sys_),
+    )
+    sols = process(rov, bas, navdata, bp, opt)
+    counts: dict[str, int] = {}
+
+    def counted():
+        for s in sols:
+            counts[s.status_name] = counts.get(s.status_name, 0) + 1
+            yield s
+
+    if str(out) == "-":
+        n = write_csv(counted(), sys.stdout)
+    else:
+        with open(out, "w", encoding="ascii", errors="replace", newline="") as f:
+            n = write_csv(counted(), f)
+    summary = ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))
+    typer.echo(f"augnet rtk: {n} epochs ({summary})", err=True)
