@@ -50,8 +50,8 @@ def sample_inputs(nrx: int = BATCH_RECEIVERS, seed: int = 2026):
 def _rate(fn, per_call: int = 1) -> float:
     """Calls (times per_call items) per second: best of REPEATS repeats of ~SECONDS_PER_REPEAT each."""
     timer = timeit.Timer(fn, timer=time.process_time)
-    number, took = timer.autorange()
-    number = max(1, int(number * SECONDS_PER_REPEAT / max(took, 1e-9)))
+    took = min(timer.repeat(repeat=3, number=1))  # warm caches, then size the repeats
+    number = max(1, int(SECONDS_PER_REPEAT / max(took, 1e-7)))
     best = min(timer.repeat(repeat=REPEATS, number=number)) / number
     return per_call / best
 
@@ -69,7 +69,7 @@ def measure() -> dict:
     )
     from augnet.gnss.rtcm.framing import crc24q
 
-    inputs = sample_inputs()
+    inputs = sample_inputs(BATCH_RECEIVERS)
     sat_ids, sig_ids, station_ids, epochs, pr, cp, dop, cnr, lock, half = inputs
     obs = Observables("G", sat_ids, sig_ids, pr[0], cp[0], dop[0], cnr[0], lock[0], half[0])
     msg = observables_to_msm(obs, 7, int(station_ids[0]), int(epochs[0]))
@@ -98,7 +98,8 @@ def measure() -> dict:
             "results": r}
 
 
-def print_table(result: dict, out=sys.stdout) -> None:
+def print_table(result: dict, out=None) -> None:
+    out = sys.stdout if out is None else out
     print(f"RTCM 3 codec benchmark: {result['message']} (CPU time, best of {REPEATS} repeats)", file=out)
     print(f"{'case':<34}{'ours msg/s':>14}{'pyrtcm msg/s':>15}{'ratio':>9}", file=out)
     for case, v in result["results"].items():
