@@ -173,3 +173,18 @@ def test_beidou_epoch_is_carried_in_df427():
     obs = random_observables(rng, "C", 2, 1)
     fields = pyrtcm_fields(encode_frame(observables_to_msm(obs, 7, 1, epoch=86_400_000 - 14_000)))
     assert fields["DF427"] == 86_386_000 and "DF004" not in fields
+
+
+def test_phase_offset_brings_any_ambiguity_into_range():
+    from augnet.gnss.rtcm import phase_offset_cycles
+
+    rng = np.random.default_rng(7)
+    obs = random_observables(rng, "G", 6, 2, missing=0.0)
+    obs.phase_cycles += rng.integers(-10**8, 10**8, obs.phase_cycles.shape)  # receiver-style ambiguities
+    raw = msm_to_observables(decode(encode_frame(observables_to_msm(obs, 7, 1, 0))[3:-3]))
+    assert np.isnan(raw.phase_cycles).all()  # nothing fits the 1171 m window
+    k = phase_offset_cycles(obs.pseudorange_m, obs.phase_cycles, obs.wavelengths_m)
+    obs.phase_cycles -= k
+    back = msm_to_observables(decode(encode_frame(observables_to_msm(obs, 7, 1, 0))[3:-3]))
+    assert np.allclose(back.phase_cycles, obs.phase_cycles, atol=1e-3)
+    assert (np.abs(obs.phase_cycles * obs.wavelengths_m - obs.pseudorange_m) <= obs.wavelengths_m).all()

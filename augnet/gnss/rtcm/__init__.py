@@ -25,6 +25,8 @@ Which function to call:
         obs = msm_to_observables(msm)
         msm = observables_to_msm(obs, level=7, station_id=..., epoch=tow_ms)
         msgs = observables_to_msm_list(...)      # splits > 64 cells over several MSM (DF393)
+        phase_offset_cycles(pr, cp, lam)         # phases must lie within 1171 m of the pseudorange:
+                                                 # subtract this (kept for the lock) or they go invalid
 
 (e) batch encode one MSM type for many receivers (VRS per train), arrays (nrx, nsat, nsig)::
 
@@ -61,6 +63,7 @@ from augnet.gnss.rtcm.observables import (
     msm_to_observables,
     observables_to_msm,
     observables_to_msm_list,
+    phase_offset_cycles,
 )
 
 __all__ = [
@@ -68,6 +71,6 @@ __all__ = [
     "RtcmMessage", "RtcmStreamReader", "SUPPORTED_TYPES", "StreamStats", "UnknownMessage", "crc24q",
     "decode", "decode_msm", "encode", "encode_frame", "encode_msm", "encode_msm_batch", "frame",
     "iter_frames", "lock_indicator_df402", "lock_indicator_df407", "lock_time_df402", "lock_time_df407",
-    "make_msm", "msm_from_fields", "msm_to_observables", "observables_to_msm", "observables_to_msm_list", "read_frames",
+    "make_msm", "msm_from_fields", "msm_to_observables", "observables_to_msm", "observables_to_msm_list", "phase_offset_cycles", "read_frames",
     "text_fields",
 ]

@@ -176,6 +176,19 @@ def _fit(raw: np.ndarray, df: str) -> np.ndarray:
     return np.where(ok, r, invalid).astype(np.int64)
 
 
+def phase_offset_cycles(pseudorange_m, phase_cycles, wavelength_m) -> np.ndarray:
+    """Whole cycles to subtract from a phase so that its range lies within half a cycle of the pseudorange.
+
+    MSM carries the phase range as an offset of at most +-1171 m (2^-8 ms) from the rough range,
+    so a phase with an arbitrary integer ambiguity does not fit and would be sent as invalid. A
+    sender picks this offset when it starts tracking a cell and keeps it for the whole lock (a new
+    offset is a cycle slip for the receiver: reset the lock time with it). NaN gives 0.
+    """
+    lam = np.asarray(wavelength_m, dtype=np.float64)
+    d = (np.asarray(phase_cycles, dtype=np.float64) * lam - np.asarray(pseudorange_m, dtype=np.float64)) / lam
+    return np.where(np.isfinite(d), np.rint(d), 0.0).astype(np.int64)
+
+
 def cell_presence(pseudorange_m, phase_cycles) -> np.ndarray:
     """A cell is sent when it has a pseudorange or a phase."""
     return np.isfinite(pseudorange_m) | np.isfinite(phase_cycles)
