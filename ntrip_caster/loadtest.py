@@ -341,7 +341,8 @@ async def open_source(host: str, port: int, mount: str, version: int, user: str 
 
 
 # --- the caster under test ---------------------------------------------------------------------
-def spawn_caster(gga: bool, use_uvloop: bool, backlog: int | None = None) -> tuple[subprocess.Popen, int, Path]:
+def spawn_caster(use_uvloop: bool = True, backlog: int | None = None
+                 ) -> tuple[subprocess.Popen, int, Path]:
     """Start `ntrip-caster serve` on a free loopback port; returns (process, port, workdir)."""
     work = Path(tempfile.mkdtemp(prefix="augnet-loadtest-"))
     cfg = work / "caster.toml"
@@ -351,7 +352,9 @@ def spawn_caster(gga: bool, use_uvloop: bool, backlog: int | None = None) -> tup
             f"stats_path = \"{work / 'stats.json'}\"\nstats_interval_s = 3600.0\n\n"
             "[[mountpoints]]\nname = \"LOAD\"\nkind = \"source\"\nwrite = [\"*\"]\n"
             f"latitude = {LOAD_BASE_LAT_DEG}\nlongitude = {LOAD_BASE_LON_DEG}\n\n"
-            "[[mountpoints]]\nname = \"NEAR\"\nkind = \"nearest\"\n")
+            "[[mountpoints]]\nname = \"NEAR\"\nkind = \"nearest\"\n\n"
+            "[[mountpoints]]\nname = \"VRS\"\nkind = \"vrs\"\n"
+            "factory = \"ntrip_caster.relay_factory:from_env\"\n")
     if backlog is not None:
         text = text.replace("[[mountpoints]]", f"[limits]\nmax_client_backlog_bytes = {backlog}\n\n"
                             "[[mountpoints]]", 1)
@@ -390,6 +393,7 @@ class LoadSettings:
     v2_fraction: float = 0.5
     processes: int = 2
     gga: bool = False
+    vrs: bool = False  # clients read the VRS mountpoint (per-client streams via a factory), GGA
     mount: str = ""
     target: str = ""  # host:port of an external caster; empty = spawn ours
     caster_pid: int = 0
@@ -417,9 +421,10 @@ def run_load(s: LoadSettings) -> dict[str, Any]:
         port = int(port_text)
         caster_pid = s.caster_pid
     else:
-        spawned, port, _work = spawn_caster(s.gga, s.uvloop, s.backlog)
+        spawned, port, _work = spawn_caster(s.uvloop, s.backlog)
         host, caster_pid = "127.0.0.1", spawned.pid
-    mount = s.mount or ("NEAR" if s.gga else "LOAD")
+    gga = s.gga or s.vrs
+    mount = s.mount or ("VRS" if s.vrs else "NEAR" if s.gga else "LOAD")
     source_mount = s.source_mount or "LOAD"
     caster = psutil.Process(caster_pid) if caster_pid else None
     ctx = mp.get_context("spawn")
@@ -436,7 +441,7 @@ def run_load(s: LoadSettings) -> dict[str, Any]:
         for n in per:
             if n == 0:
                 continue
-            specs = client_specs(host, port, mount, n, s.v2_fraction, s.gga, s.user or None,
+            specs = client_specs(host, port, mount, n, s.v2_fraction, gga, s.user or None,
                                  s.password or None, offset)
             offset += n
             parent, child = ctx.Pipe()
@@ -546,6 +551,8 @@ def run(
     v2_fraction: float = typer.Option(0.5, help="Share of clients speaking NTRIP 2 (rest NTRIP 1)."),
     processes: int = typer.Option(2, help="Client worker processes."),
     gga: bool = typer.Option(False, help="Clients send GGA to a GGA-driven mountpoint (NEAR)."),
+    vrs: bool = typer.Option(False, help="Clients send GGA to the VRS mountpoint: one stream per "
+                             "client through the stream factory (relaying LOAD)."),
     mount: str = typer.Option("", help="Mountpoint clients read (default LOAD, or NEAR with --gga)."),
     target: str = typer.Option("", help="host:port of an external caster (default: spawn ours)."),
     caster_pid: int = typer.Option(0, help="PID of the external caster, for CPU and memory."),
@@ -566,7 +573,7 @@ def run(
         raise typer.Exit(2)
     result = run_load(LoadSettings(
         clients=clients, epochs=epochs, rate_hz=rate, size=size, v2_fraction=v2_fraction,
-        processes=processes, gga=gga, mount=mount, target=target, caster_pid=caster_pid,
+        processes=processes, gga=gga, vrs=vrs, mount=mount, target=target, caster_pid=caster_pid,
         source_version=source_version, source_user=source_user, source_password=source_password,
         source_mount=source_mount, user=user, password=password, uvloop=uvloop, label=label))
     text = json.dumps(result, indent=2)

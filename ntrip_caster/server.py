@@ -121,7 +121,7 @@ class Mountpoint:
     __slots__ = ("name", "kind", "cfg", "v1", "v2", "source", "aligner", "factory", "bytes_in",
                  "frames_in", "bytes_out", "clients_total", "drops", "source_sessions",
                  "created_at", "caster", "record", "auto", "fanout_last_ms", "fanout_max_ms",
-                 "n_clients")
+                 "n_clients", "taps")
 
     def __init__(self, caster: "Caster", cfg: MountConfig, factory: StreamFactory | None = None) -> None:
         self.caster = caster
@@ -145,6 +145,7 @@ class Mountpoint:
         self.fanout_last_ms = 0.0  # time one publish took to hand a piece to every client
         self.fanout_max_ms = 0.0
         self.n_clients = 0  # clients connected to this mountpoint (for nearest: not per base)
+        self.taps: list[Callable[[bytes], None]] = []  # in-process readers (centre, relay factory)
 
     @property
     def live(self) -> bool:
@@ -182,6 +183,11 @@ class Mountpoint:
         self.bytes_out += out
         for s in dropped:
             self.caster.drop_client(s, "backlog")
+        for tap in self.taps:
+            try:
+                tap(data)
+            except Exception:  # an in-process reader's bug must not stop the stream
+                log.exception("tap on %s failed", self.name)
         ms = (time.perf_counter() - t0) * 1e3
         self.fanout_last_ms = ms
         if ms > self.fanout_max_ms:
@@ -348,6 +354,10 @@ class Caster:
             if m.kind == "vrs":
                 factory = factories.get(m.name) or load_factory(m.factory or "")
             self.mounts[m.name] = Mountpoint(self, m, factory)
+        for mp in list(self.mounts.values()):  # after every mountpoint exists
+            attach = getattr(mp.factory, "attach", None)
+            if callable(attach):  # factories that read other mountpoints get the caster
+                attach(self)
 
     # --- life cycle ------------------------------------------------------------------------------
     async def start(self) -> int:
@@ -652,6 +662,21 @@ class Caster:
             except Exception:
                 log.exception("stream handle close failed for client %d", s.id)
             s.handle = None
+
+    def tap(self, mount: str, callback: Callable[[bytes], None]) -> Callable[[], None]:
+        """Call `callback(data)` (on the loop) with every piece of `mount`'s stream, frame-aligned,
+        as clients get it. Returns a function that removes the tap. In-process readers (the
+        centre's station ingest, relay factories) use this instead of an NTRIP connection."""
+        m = self.mounts.get(mount)
+        if m is None or m.kind != "source":
+            raise ValueError(f"cannot tap {mount!r}: no source mountpoint of that name")
+        m.taps.append(callback)
+
+        def untap() -> None:
+            if callback in m.taps:
+                m.taps.remove(callback)
+
+        return untap
 
     # --- statistics --------------------------------------------------------------------------------
     def snapshot(self, *, clients: bool = True) -> dict[str, Any]:

@@ -321,3 +321,25 @@ def test_unknown_sources_allowed_when_configured():
         recs = {r.mountpoint: r for r in parse_sourcetable(read_all(c).partition(b"\r\n\r\n")[2])}
         assert recs["NEWMOUNT"].identifier == "Shanghai" and recs["NEWMOUNT"].latitude == 31.1
         s.close()
+
+
+def test_relay_factory_serves_vrs_clients_through_the_per_client_path(shared_data):
+    from ntrip_caster.relay_factory import MountRelayFactory
+
+    relay = MountRelayFactory("BASE01")
+    vrs = MountConfig("VRS", "vrs", frozenset({"trains"}), factory="unused:unused")
+    data = rtcm_sample(shared_data, n_bytes=8000)
+    with CasterThread(make_config(extra_mounts=(vrs,)), {"VRS": relay}) as ct:
+        src = open_v1_source(ct.port, "BASE01")
+        c1, _ = open_client(ct.port, "VRS", version=1, gga=format_gga(31.0, 121.0))
+        c2, _ = open_client(ct.port, "VRS", version=2, gga=format_gga(31.0, 121.1))
+        wait_for(lambda: relay.opened == 2)
+        src.sendall(data)
+        assert read_exactly(c1, len(data)) == data
+        assert read_v2_body(c2, len(data)) == data
+        c1.close()
+        wait_for(lambda: len(relay.sinks) == 1)  # closing a client closes its stream handle
+        with pytest.raises(ValueError):
+            ct.call(ct.caster.tap, "NEAR", lambda d: None)
+        c2.close()
+        src.close()
