@@ -23,6 +23,7 @@ from augnet.gnss.rtcm.fields import FIELDS, to_value
 from augnet.gnss.rtcm.framing import message_type
 from augnet.gnss.rtcm.layouts import (
     MSM_EPOCH_FIELDS,
+    MSM_HEADER_TAIL,
     MSM_MAX_CELLS,
     cell_fields,
     msm_kind,
@@ -30,9 +31,28 @@ from augnet.gnss.rtcm.layouts import (
     sat_fields,
 )
 
-# Bit positions of the MSM header (Table 3.5-78); the epoch is 30 bits for every system.
-HEADER_BITS_BEFORE_CELL_MASK = 169  # 12 + 12 + 30 + 1 + 3 + 7 + 2 + 2 + 1 + 3 + 64 + 32
-_HEAD_READ_BYTES = 30  # covers the header with the largest (64-bit) cell mask: 233 bits
+# MSM header fields (Table 3.5-78) and the MsmMessage attribute each one fills. The epoch field
+# is 30 bits for every system (one DF, or GLONASS's DF416 + DF034; see layouts.MSM_EPOCH_FIELDS).
+MSM_EPOCH_BITS = 30
+_HEADER_ATTRS = (("DF002", "msg_type"), ("DF003", "station_id"), ("epoch", "epoch"), ("DF393", "multiple"),
+                 ("DF409", "iods"), ("DF001_7", "reserved"), ("DF411", "clock_steering"),
+                 ("DF412", "external_clock"), ("DF417", "smoothing"), ("DF418", "smoothing_interval"),
+                 ("DF394", "sat_mask"), ("DF395", "sig_mask"))
+assert tuple(df for df, _ in _HEADER_ATTRS[3:]) == MSM_HEADER_TAIL[:-1]  # same order as the layout table
+
+
+def _header_positions() -> tuple[dict[str, tuple[int, int]], int]:
+    out, pos = {}, 0
+    for df, attr in _HEADER_ATTRS:
+        width = MSM_EPOCH_BITS if df == "epoch" else FIELDS[df].width
+        out[attr] = (pos, width)
+        pos += width
+    return out, pos
+
+
+# attribute -> (bit offset, width); the cell mask (DF396, Nsat x Nsig bits) follows at 169
+HEADER_POSITIONS, HEADER_BITS_BEFORE_CELL_MASK = _header_positions()
+_HEAD_READ_BYTES = (HEADER_BITS_BEFORE_CELL_MASK + MSM_MAX_CELLS + 7) // 8  # header with a 64-bit cell mask
 
 # "No valid value" markers (RTCM 10403.3 DF397, DF399, DF400, DF401, DF404, DF405, DF406)
 INVALID_ROUGH_MS = 255
@@ -223,6 +243,10 @@ def _build_layout(msg_type: int, sat_mask: int, sig_mask: int, cell_bits: int) -
     )
 
 
+# header values passed to MsmMessage as they are (the masks become ids and the cell mask instead)
+_HEADER_SCALARS = tuple((a, p) for a, p in HEADER_POSITIONS.items() if a not in ("sat_mask", "sig_mask"))
+
+
 def decode_msm(payload: bytes) -> MsmMessage:
     """Decode an MSM payload into arrays. Raises ``DecodeError`` when the payload is too short."""
     n = len(payload)
@@ -239,12 +263,12 @@ def decode_msm(payload: bytes) -> MsmMessage:
     def bits(pos: int, width: int) -> int:
         return (h >> (top - pos - width)) & ((1 << width) - 1)
 
-    sat_mask = bits(73, 64)
-    sig_mask = bits(137, 32)
+    sat_mask = bits(*HEADER_POSITIONS["sat_mask"])
+    sig_mask = bits(*HEADER_POSITIONS["sig_mask"])
     ncellbits = sat_mask.bit_count() * sig_mask.bit_count()
     if ncellbits > MSM_MAX_CELLS:
         raise DecodeError(f"MSM {mt}: {ncellbits} cells exceed the standard's limit of {MSM_MAX_CELLS}")
-    cell_bits = bits(169, ncellbits)
+    cell_bits = bits(HEADER_BITS_BEFORE_CELL_MASK, ncellbits)
     key = (mt, sat_mask, sig_mask, cell_bits)
     layout = _LAYOUT_CACHE.get(key)
     if layout is None:
@@ -260,22 +284,9 @@ def decode_msm(payload: bytes) -> MsmMessage:
     sb = layout.sign_bit
     vals = raw - ((raw & sb) << 1)  # two's complement: subtract 2^width when the sign bit is set
     roles = {role: vals[a:b] for role, a, b in layout.slices}
-    return MsmMessage(
-        msg_type=mt,
-        station_id=bits(12, 12),
-        epoch=bits(24, 30),
-        sat_ids=layout.sat_ids,
-        sig_ids=layout.sig_ids,
-        cell_mask=layout.cell_mask,
-        multiple=bits(54, 1),
-        iods=bits(55, 3),
-        reserved=bits(58, 7),
-        clock_steering=bits(65, 2),
-        external_clock=bits(67, 2),
-        smoothing=bits(69, 1),
-        smoothing_interval=bits(70, 3),
-        **roles,
-    )
+    head_values = {attr: bits(pos, width) for attr, (pos, width) in _HEADER_SCALARS}
+    return MsmMessage(sat_ids=layout.sat_ids, sig_ids=layout.sig_ids, cell_mask=layout.cell_mask,
+                      **head_values, **roles)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -357,12 +368,10 @@ def encode_msm(msg: MsmMessage) -> bytes:
     """
     values, widths = check_msm(msg)
     nsat, nsig = msg.nsat, msg.nsig
-    acc = msg.msg_type
-    for v, w in ((msg.station_id, 12), (msg.epoch, 30), (msg.multiple, 1), (msg.iods, 3), (msg.reserved, 7),
-                 (msg.clock_steering, 2), (msg.external_clock, 2), (msg.smoothing, 1),
-                 (msg.smoothing_interval, 3), (msg.sat_mask, 64), (msg.sig_mask, 32),
-                 (msg.cell_mask_bits, nsat * nsig)):
-        acc = (acc << w) | v
+    acc = 0
+    for attr, (_, width) in HEADER_POSITIONS.items():
+        acc = (acc << width) | getattr(msg, attr)
+    acc = (acc << (nsat * nsig)) | msg.cell_mask_bits
     nhead = HEADER_BITS_BEFORE_CELL_MASK + nsat * nsig
     head = np.unpackbits(np.frombuffer(acc.to_bytes((nhead + 7) // 8, "big"), dtype=np.uint8))
     spread = (values[:, None] >> _SHIFTS_32) & 1  # arithmetic shift: two's complement bits of negatives
