@@ -23,15 +23,21 @@ def inspect(
     recover: bool = typer.Option(
         False, "--recover-sids", help="solve unknown senders' SIDs from two frames and verify the rest with them"
     ),
+    cycle_ms: int = typer.Option(250, help="main cycle for the replay through a monitoring receiver, ms"),
+    delta_time: int = typer.Option(3, help="deltaTime for the replay, cycles"),
+    delay_time: int = typer.Option(3, help="DelayTime for the replay, cycles"),
 ) -> None:
-    """Per source: frames seen, CRC16 passed, safety check words passed."""
+    """Per source: frames seen, CRC16 passed, safety check words passed; per path, the receive verdicts."""
+    from rssp1.config import LinkTiming
+
     try:
         devices = [parse_device(d) for d in device or []]
     except ValueError as exc:
         raise typer.BadParameter(str(exc), param_hint="--device") from exc
     try:
         report = inspect_captures(
-            list(files), devices, ports=tuple(port) if port else RSSP1_UDP_PORTS, all_udp=all_udp, recover=recover
+            list(files), devices, ports=tuple(port) if port else RSSP1_UDP_PORTS, all_udp=all_udp, recover=recover,
+            timing=LinkTiming(cycle_s=cycle_ms / 1000, delta_time=delta_time, delay_time=delay_time),
         )
     except ValueError as exc:
         typer.echo(f"error: {exc}", err=True)

@@ -182,6 +182,24 @@ class Endpoint:
         self.stats["ssr_accepted"] += 1
         return []
 
+    def monitor_from(self, tc: int) -> None:
+        """Passive monitoring: take the peer's configured SINIT (T(0) = SINIT) instead of an SSE/SSR
+        handshake, as if synchronised just before TC `tc`.
+
+        For a line monitor or a capture replay that can only listen. It relies on the sender seeding
+        its timestamps with SINIT from TC 0, which every device in the captures does; the check words
+        are verified exactly as after an SSR.
+        """
+        seed = self.peer.timestamp_seed
+        before = (tc - 1) % TC_MODULUS
+        self._last_tc = before
+        self._last_t = (TIMESTAMP_CH1.advance(seed[0], before), TIMESTAMP_CH2.advance(seed[1], before))
+        self._anchor_tc, self._anchor_cycle = before, self.local_cycle
+        self._missed_cycles = 0
+        self._sse_tc_e = None
+        self.state = LinkState.SYNCING
+        self.stats["monitor_primed"] += 1
+
     def _refresh_anchor(self, tc_r: int, t_r: tuple[int, int]) -> list[Event]:
         """An SSR answering a refresh SSE while the link is up: re-anchor the estimate of the peer's TC.
 

@@ -5,16 +5,22 @@ the SID as in every capture we have); sources without them are counted as "not c
 also be given `recover=True`: the SIDs are then solved from the source's first two frames
 (rssp1.sid_recovery) and every other frame is verified against them, which is what shows the
 recovery is right.
+
+For every source whose SIDs are known, each path (source, destination, sending host, machine A/B) is
+also replayed through a receiving `Endpoint` in monitor mode, its local cycles clocked by the capture
+timestamps: what a receiver on that network would have accepted, dropped, and when its link would
+have gone down. A monitor cannot send SSE, so after a link loss it re-primes at the next frame.
 """
 
 from __future__ import annotations
 
-from collections import defaultdict
+from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from rssp1.checkword import timestamp_from_svc
-from rssp1.config import DeviceConfig
+from rssp1.config import DeviceConfig, LinkTiming
+from rssp1.endpoint import DataReceived, Endpoint, FrameDropped, LinkDown, LinkState
 from rssp1.frames import RSD_TYPES, TYPE_SSE, TYPE_SSR, FrameError, Rsd, decode_frame
 from rssp1.pcapng import CaptureStats, udp_datagrams
 from rssp1.sid_recovery import recover_sid
@@ -44,11 +50,27 @@ class SourceReport:
 
 
 @dataclass
+class PathReplay:
+    """One path's frames through a receiving Endpoint in monitor mode."""
+
+    source: int
+    destination: int
+    sender_ip: str
+    machine: str
+    file_index: int = 0
+    frames: int = 0
+    accepted: int = 0
+    dropped: dict[str, int] = field(default_factory=dict)
+    link_downs: dict[str, int] = field(default_factory=dict)
+
+
+@dataclass
 class CaptureReport:
     files: list[str]
     capture: CaptureStats
     sources: dict[int, SourceReport]
     undecodable: dict[str, int]  # datagrams on RSSP-I ports that are not frames (by reason)
+    paths: list[PathReplay] = field(default_factory=list)
 
     @property
     def rsd_total(self) -> int:
@@ -70,13 +92,15 @@ def inspect_captures(
     ports: tuple[int, ...] = RSSP1_UDP_PORTS,
     all_udp: bool = False,
     recover: bool = False,
+    timing: LinkTiming | None = None,
 ) -> CaptureReport:
     known = {d.address: d for d in devices}
     capture = CaptureStats()
     sources: dict[int, SourceReport] = {}
     undecodable: dict[str, int] = defaultdict(int)
     rsds: dict[int, list[Rsd]] = defaultdict(list)
-    for path in paths:
+    by_path: dict[tuple[int, int, str, str, int], list[tuple[float, bytes]]] = defaultdict(list)
+    for file_index, path in enumerate(paths):
         for dgram in udp_datagrams(path, capture):
             if not all_udp and dgram.dst_port not in ports and dgram.src_port not in ports:
                 continue
@@ -98,12 +122,15 @@ def inspect_captures(
                 report.rsd += 1
                 report.machines.add(frame.machine)
                 rsds[source].append(frame)
+                key = (source, frame.destination, dgram.src_ip, frame.machine, file_index)
+                by_path[key].append((dgram.timestamp_s, payload))
                 report.first_tc = frame.tc if report.first_tc is None else min(report.first_tc, frame.tc)
                 report.last_tc = frame.tc if report.last_tc is None else max(report.last_tc, frame.tc)
             elif frame.__class__.__name__ == "Sse":
                 report.sse += 1
             else:
                 report.ssr += 1
+    verified: dict[int, DeviceConfig] = {}
     for source, frames in rsds.items():
         report = sources[source]
         device = known.get(source)
@@ -122,12 +149,51 @@ def inspect_captures(
         if report.sid is None or seed is None:
             report.svc_not_checked += len(frames)
             continue
+        verified[source] = DeviceConfig(source, report.sid, sinit=seed)
         for frame in frames:
             if timestamp_from_svc(frame.svc, frame.data, report.sid) == timestamp_at(seed, frame.tc):
                 report.svc_passed += 1
             else:
                 report.svc_failed += 1
-    return CaptureReport([str(p) for p in paths], capture, dict(sorted(sources.items())), dict(undecodable))
+    replays = [
+        replay_path(key, sorted(stream), verified[key[0]], timing or LinkTiming())
+        for key, stream in sorted(by_path.items())
+        if key[0] in verified
+    ]
+    return CaptureReport([str(p) for p in paths], capture, dict(sorted(sources.items())), dict(undecodable), replays)
+
+
+def replay_path(
+    key: tuple[int, int, str, str, int], stream: list[tuple[float, bytes]], sender: DeviceConfig, timing: LinkTiming
+) -> PathReplay:
+    """Feed one path's frames (of one capture file), at their captured times, to a monitoring receiver."""
+    source, destination, sender_ip, machine, file_index = key
+    result = PathReplay(source, destination, sender_ip, machine, file_index)
+    receiver = DeviceConfig(destination, (0, 0))  # a monitor never signs anything
+    ep = Endpoint(receiver, sender, timing)
+    t0 = stream[0][0]
+    dropped: Counter[str] = Counter()
+    downs: Counter[str] = Counter()
+
+    def note(events) -> None:
+        for e in events:
+            if isinstance(e, DataReceived):
+                result.accepted += 1
+            elif isinstance(e, FrameDropped):
+                dropped[e.reason] += 1
+            elif isinstance(e, LinkDown):
+                downs[e.reason] += 1
+
+    for ts, raw in stream:
+        target = int((ts - t0) / timing.cycle_s)
+        while ep.local_cycle < target:
+            note(ep.cycle(None)[1])
+        if ep.state is LinkState.DOWN:
+            ep.monitor_from(int.from_bytes(raw[6:10], "little"))
+        result.frames += 1
+        note(ep.receive(raw))
+    result.dropped, result.link_downs = dict(dropped), dict(downs)
+    return result
 
 
 def format_report(report: CaptureReport) -> str:
@@ -145,6 +211,18 @@ def format_report(report: CaptureReport) -> str:
             f"{s.svc_failed:7d} {s.svc_not_checked:9d}  {sid}"
         )
     lines.append(f"RSD frames: {report.rsd_total}")
+    if report.paths:
+        lines.append("replayed through a monitoring receiver (local cycles from capture times):")
+        lines.append(
+            f"{'file':>4} {'source':>6} {'dest':>6} {'from':>15} {'AB':>2} {'frames':>7} {'accepted':>8}  link downs / drops"
+        )
+        for p in report.paths:
+            downs = ", ".join(f"{k} {v}" for k, v in sorted(p.link_downs.items())) or "-"
+            drops = ", ".join(f"{k} {v}" for k, v in sorted(p.dropped.items())) or "-"
+            lines.append(
+                f"{p.file_index + 1:>4} 0x{p.source:04x} 0x{p.destination:04x} {p.sender_ip:>15} {p.machine:>2} {p.frames:7d} {p.accepted:8d}"
+                f"  {downs} / {drops}"
+            )
     if report.undecodable:
         lines.append("not decodable: " + ", ".join(f"{k} {v}" for k, v in sorted(report.undecodable.items())))
     return "\n".join(lines)

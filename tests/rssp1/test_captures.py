@@ -10,7 +10,7 @@ import pytest
 from typer.testing import CliRunner
 
 from rssp1.cli import app
-from rssp1.config import DeviceConfig
+from rssp1.config import DeviceConfig, LinkTiming
 from rssp1.frames import Rsd, decode_frame
 from rssp1.inspect import inspect_captures, parse_device
 from rssp1.pcapng import CaptureStats, udp_datagrams
@@ -64,6 +64,26 @@ def test_sids_recovered_from_two_frames_verify_every_frame(captures):
     for s in report.sources.values():
         assert s.sid_recovered and s.svc_passed == s.rsd and s.svc_failed == 0
     assert sum(s.svc_passed for s in report.sources.values()) == RSD_FRAMES_IN_CAPTURES
+
+
+def test_captured_streams_replayed_through_the_receive_state_machine(captures):
+    """Real traffic through Endpoint (monitor mode, local cycles from the capture timestamps, the
+    field timing of 250 ms / deltaTime 3 / DelayTime 3): every machine-A path is accepted frame for
+    frame; machine B of 0x002A skipped 3 cycles once (TC +4) and its receiver's link drops once."""
+    report = inspect_captures(captures, recover=True, timing=LinkTiming(0.25, 3, 4, 3))
+    assert len(report.paths) == 18
+    assert sum(p.frames for p in report.paths) == RSD_FRAMES_IN_CAPTURES
+    for p in report.paths:
+        if (p.source, p.machine) == (0x2A, "B"):
+            assert p.link_downs == {"timeout": 1} and p.accepted == p.frames == 19
+        else:
+            assert p.accepted == p.frames and p.link_downs == {} and p.dropped == {}, p
+    # Stricter limits (deltaTime 2, DelayTime 2) also break 0x002A B at each of its four TC +2 steps,
+    # while 0x0029 B, which never skipped a cycle, stays up: the replay sees exactly the capture's gaps.
+    strict = inspect_captures(captures, recover=True, timing=LinkTiming(0.25, 2, 4, 2))
+    b29 = next(p for p in strict.paths if (p.source, p.machine) == (0x29, "B"))
+    b2a = next(p for p in strict.paths if (p.source, p.machine) == (0x2A, "B"))
+    assert b29.link_downs == {} and sum(b2a.link_downs.values()) >= 4  # the four TC +2 steps too
 
 
 def test_forged_frame_from_recovered_identity_verifies(captures):
