@@ -8,7 +8,8 @@ Cases (a 12-satellite x 2-signal GPS MSM7, 24 cells, from realistic observables)
   batch       1,000 receivers (VRS streams) -> 1,000 framed MSM7 in one call
 
 Each figure is CPU time of this process (time.process_time), best of several repeats: on a shared
-machine other jobs then cost us cache, not the whole time slice they take. Run: ``augnet bench rtcm`` or ``python -m augnet.bench.rtcm [--json]``.
+machine other jobs then cost us cache, not the whole time slice they take.
+Run: ``augnet bench rtcm`` or ``python -m augnet.bench.rtcm [--json]``.
 """
 
 from __future__ import annotations

@@ -71,6 +71,6 @@ __all__ = [
     "RtcmMessage", "RtcmStreamReader", "SUPPORTED_TYPES", "StreamStats", "UnknownMessage", "crc24q",
     "decode", "decode_msm", "encode", "encode_frame", "encode_msm", "encode_msm_batch", "frame",
     "iter_frames", "lock_indicator_df402", "lock_indicator_df407", "lock_time_df402", "lock_time_df407",
-    "make_msm", "msm_from_fields", "msm_to_observables", "observables_to_msm", "observables_to_msm_list", "phase_offset_cycles", "read_frames",
-    "text_fields",
+    "make_msm", "msm_from_fields", "msm_to_observables", "observables_to_msm", "observables_to_msm_list",
+    "phase_offset_cycles", "read_frames", "text_fields",
 ]
