@@ -262,7 +262,14 @@ class CasterProtocol(asyncio.Protocol):
         if self.pending is not None:
             self.pending.extend(events)
             return
-        self.handle_events(events)
+        try:
+            self.handle_events(events)
+        except Exception:  # a bug must cost one connection, never the caster
+            log.exception("internal error on a connection from %s; closing it", self.peer_ip)
+            self.caster.counters["internal_errors"] += 1
+            if self.client is not None:
+                self.caster.remove_client(self.client)
+            self.close()
 
     def connection_lost(self, exc: Exception | None) -> None:
         self.closed = True

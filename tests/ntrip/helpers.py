@@ -65,7 +65,7 @@ def read_all(sock: socket.socket, timeout: float = 5.0) -> bytes:
     while True:
         try:
             data = sock.recv(65536)
-        except TimeoutError:
+        except (TimeoutError, ConnectionResetError):  # a dropped client is aborted (RST)
             break
         if not data:
             break

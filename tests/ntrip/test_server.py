@@ -343,3 +343,23 @@ def test_relay_factory_serves_vrs_clients_through_the_per_client_path(shared_dat
             ct.call(ct.caster.tap, "NEAR", lambda d: None)
         c2.close()
         src.close()
+
+
+def test_gga_rate_limit_and_upload_flood():
+    limits = Limits(gga_min_interval_s=1.0, max_client_upload_bytes_per_s=4000)
+    with CasterThread(make_config(limits=limits)) as ct:
+        s1 = open_v1_source(ct.port, "BASE01")
+        c, head = open_client(ct.port, "NEAR")
+        assert head == b"ICY 200 OK\r\n"
+        for _ in range(10):  # a 10 Hz receiver: one GGA per second is processed
+            c.sendall(format_gga(31.0, 121.0))
+            time.sleep(0.01)
+        wait_for(lambda: ct.snapshot()["clients"][0]["gga_count"] == 1)
+        time.sleep(0.2)
+        snap = ct.snapshot()
+        assert snap["clients"][0]["gga_count"] == 1 and snap["counters"]["gga_rate_limited"] == 9
+        assert snap["clients"][0]["base"] == "BASE01" and snap["clients"][0]["last_gga_at"]
+        c.sendall(b"x" * 5000)  # far beyond any GGA rate: hostile, dropped
+        assert read_all(c, timeout=5) == b""
+        assert ct.snapshot(clients=False)["mounts"]["NEAR"]["drops"] == {"upload_flood": 1}
+        s1.close()
