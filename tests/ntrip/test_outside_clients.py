@@ -219,3 +219,28 @@ def test_curl_sees_401_404_503(tmp_path):
         assert status("-u", f"train1:{TRAIN_PW}", f"http://127.0.0.1:{ct.port}/BASE01")[0] == 503
         held.close()
         src.close()
+
+
+def test_str2str_sends_gga_to_the_nearest_mount(caster, data, tmp_path):
+    """RTKLIB 2.4.3 `-p lat lon hgt -n ms` sends a $GNGGA (0 satellites, fixed position) a second
+    or two after connecting; the caster must keep it connected until then and pick its base."""
+    str2str = require_tool("str2str")
+    s1 = open_v1_source(caster.port, "BASE01")
+    s2 = open_v1_source(caster.port, "BASE02")
+    out = tmp_path / "near.rtcm3"
+    proc = subprocess.Popen([str2str, "-in", f"ntrip://train1:{TRAIN_PW}@127.0.0.1:{caster.port}/NEAR",
+                             "-p", "31.0", "121.48", "10", "-n", "1000", "-out", f"file://{out}"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        wait_for(lambda: (cl := caster.snapshot()["clients"]) and cl[0]["base"] == "BASE02",
+                 timeout=15)
+        info = caster.snapshot()["clients"][0]
+        assert info["last_position"][1] == pytest.approx(121.48, abs=1e-6)
+        time.sleep(0.3)
+        _send_paced(s1, data[:3000])
+        _send_paced(s2, data)
+        assert _wait_file(out, len(data)) == data
+    finally:
+        _stop(proc)
+        s1.close()
+        s2.close()

@@ -227,3 +227,10 @@ def test_frame_aligner_forwards_every_byte_and_holds_partial_frames(shared_data:
     f = frame_rtcm3(b"\x3e\xd0" + bytes(100))
     assert a.feed(f[:50]) == b"" and a.pending == 50
     assert a.feed(f[50:] + f[:2]) == f and a.pending == 2
+
+
+def test_v2_post_without_chunked_body_is_raw():
+    conn = NtripServerConnection()
+    events = conn.receive_data(b"POST /M HTTP/1.1\r\nNtrip-Version: Ntrip/2.0\r\n\r\n\xd3\x00\x00")
+    assert not events[0].request.chunked and events[1] == SourceData(b"\xd3\x00\x00")
+    assert conn.receive_data(b"more") == [SourceData(b"more")]
