@@ -114,3 +114,41 @@ def test_blocks_join_seamlessly(monkeypatch):
     assert len(batch) == 40
     for i in range(40):
         assert batch[i] == single("E", 7, *args, i, multiple=1), f"receiver {i}"
+
+
+@pytest.mark.parametrize("msg_type", [1005, 1006, 1019, 1042, 1045, 1046])
+@settings(max_examples=5, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data(), nrx=st.integers(1, 30))
+def test_fixed_batch_equals_single_messages(msg_type, data, nrx):
+    from augnet.gnss.rtcm import RtcmMessage, encode_fixed_batch, encode_frame
+
+    from ._support import fixed_message_fields
+
+    per_rx = [data.draw(fixed_message_fields(msg_type)) for _ in range(nrx)]
+    columns = {k: np.array([f[k] for f in per_rx]) for k in per_rx[0] if k != "DF002"}
+    batch = encode_fixed_batch(msg_type, columns)
+    assert len(batch) == nrx
+    for i, f in enumerate(per_rx):
+        assert batch[i] == encode_frame(RtcmMessage(msg_type, f))
+
+
+def test_fixed_batch_vrs_positions_read_by_pyrtcm():
+    from augnet.gnss.rtcm import encode_fixed_batch
+
+    rng = np.random.default_rng(15)
+    n = 50
+    xyz = np.array([-2_148_744.0, 4_426_641.0, 4_044_655.0]) + rng.uniform(-5e4, 5e4, (n, 3))
+    fields = {"DF003": np.arange(n), "DF021": 0, "DF022": 1, "DF023": 0, "DF024": 1, "DF141": 1, "DF142": 0,
+              "DF364": 0, "DF025": xyz[:, 0], "DF026": xyz[:, 1], "DF027": xyz[:, 2], "DF028": 0.0}
+    batch = encode_fixed_batch(1006, fields)
+    for i in range(n):
+        theirs = pyrtcm_fields(batch[i])
+        assert theirs["DF003"] == i and theirs["DF141"] == 1
+        assert abs(theirs["DF025"] - xyz[i, 0]) <= 5e-5 and abs(theirs["DF027"] - xyz[i, 2]) <= 5e-5
+    with pytest.raises(EncodeError, match="DF025"):
+        encode_fixed_batch(1006, fields | {"DF025": 2e7})  # beyond the 38-bit, 0.1 mm field
+    del fields["DF026"]
+    with pytest.raises(EncodeError, match="DF026"):
+        encode_fixed_batch(1006, fields)
+    with pytest.raises(EncodeError, match="variable-length"):
+        encode_fixed_batch(1033, {"DF003": 1})

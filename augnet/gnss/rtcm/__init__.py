@@ -32,6 +32,7 @@ Which function to call:
 
         batch = encode_msm_batch("G", 7, sat_ids, sig_ids, station_ids, epochs, pr, cp, dop, cnr, lock)
         batch[i]                                 # framed bytes of receiver i; batch.data is all of them
+        encode_fixed_batch(1006, {"DF003": ids, "DF025": x, ...})   # e.g. every train's VRS position
 
 Supported: 1005, 1006, 1033, 1019, 1042, 1045, 1046 and MSM4-7 of GPS, GLONASS, Galileo, SBAS,
 QZSS, BeiDou, NavIC (observables need the system in ``augnet.gnss.signals``: G, E, C). Values are
@@ -39,7 +40,7 @@ those pyrtcm reports (scaled, DF names); MSM epochs are the raw 30-bit field (TO
 own time scale: BDT for BeiDou; day-of-week << 27 | tk for GLONASS).
 """
 
-from augnet.gnss.rtcm.batch import EncodedBatch, encode_msm_batch
+from augnet.gnss.rtcm.batch import EncodedBatch, encode_fixed_batch, encode_msm_batch
 from augnet.gnss.rtcm.codec import (
     Message,
     MessageReader,
@@ -69,7 +70,7 @@ from augnet.gnss.rtcm.observables import (
 __all__ = [
     "DecodeError", "EncodeError", "EncodedBatch", "Frame", "Message", "MessageReader", "MsmMessage", "Observables",
     "RtcmMessage", "RtcmStreamReader", "SUPPORTED_TYPES", "StreamStats", "UnknownMessage", "crc24q",
-    "decode", "decode_msm", "encode", "encode_frame", "encode_msm", "encode_msm_batch", "frame",
+    "decode", "decode_msm", "encode", "encode_frame", "encode_fixed_batch", "encode_msm", "encode_msm_batch", "frame",
     "iter_frames", "lock_indicator_df402", "lock_indicator_df407", "lock_time_df402", "lock_time_df407",
     "make_msm", "msm_from_fields", "msm_to_observables", "observables_to_msm", "observables_to_msm_list",
     "phase_offset_cycles", "read_frames", "text_fields",

@@ -23,9 +23,9 @@ from functools import lru_cache
 import numpy as np
 
 from augnet.gnss.rtcm.errors import EncodeError
-from augnet.gnss.rtcm.fields import FIELDS
+from augnet.gnss.rtcm.fields import FIELDS, Kind
 from augnet.gnss.rtcm.framing import FRAME_OVERHEAD_BYTES, PREAMBLE, crc24q_rows
-from augnet.gnss.rtcm.layouts import MSM_MAX_CELLS, cell_fields, msm_type, sat_fields
+from augnet.gnss.rtcm.layouts import LAYOUTS, MSM_MAX_CELLS, Repeat, cell_fields, msm_type, sat_fields
 from augnet.gnss.rtcm.observables import cell_presence, observables_to_fields, wavelengths
 
 # Receivers encoded per block. Each step streams (fields x receivers) arrays; in blocks of a few
@@ -112,6 +112,70 @@ def _pack_columns(values: np.ndarray, widths: tuple[int, ...]) -> np.ndarray:
     return rows.view(np.uint8)[:, : p.nbytes]
 
 
+def _frame_rows(payload: np.ndarray) -> np.ndarray:
+    """(n, nbytes) payloads -> (n, nbytes + 6) frames: preamble, length, payload, CRC-24Q."""
+    n, nbytes = payload.shape
+    frames = np.empty((n, nbytes + FRAME_OVERHEAD_BYTES), dtype=np.uint8)
+    frames[:, 0] = PREAMBLE
+    frames[:, 1] = nbytes >> 8
+    frames[:, 2] = nbytes & 0xFF
+    frames[:, 3 : 3 + nbytes] = payload
+    crc = crc24q_rows(frames[:, : 3 + nbytes])
+    frames[:, -3] = crc >> 16
+    frames[:, -2] = (crc >> 8) & 0xFF
+    frames[:, -1] = crc & 0xFF
+    return frames
+
+
+def encode_fixed_batch(msg_type: int, fields: dict[str, object], nrx: int | None = None) -> EncodedBatch:
+    """One framed fixed-layout message per receiver, e.g. the 1006 of every train's VRS.
+
+    ``fields`` maps pyrtcm's names to a scalar (same for all) or an (nrx,) array of values, as
+    ``RtcmMessage`` takes them; byte-identical to ``encode_frame(RtcmMessage(...))`` per receiver.
+    Layouts with repeated groups (1033) are not batched: their length varies with the strings.
+    """
+    try:
+        layout = LAYOUTS[msg_type]
+    except KeyError:
+        raise EncodeError(f"message type {msg_type} has no fixed layout") from None
+    if any(isinstance(item, Repeat) for item in layout):
+        raise EncodeError(f"message {msg_type} has variable-length groups; encode it per receiver")
+    fields = {"DF002": msg_type, **fields}
+    if nrx is None:
+        nrx = max((np.size(v) for v in fields.values() if np.ndim(v) > 0), default=1)
+    if nrx == 0:
+        return EncodedBatch(b"", np.zeros(1, dtype=np.int64))
+    cols: list[np.ndarray] = []
+    widths: list[int] = []
+    for name in layout:
+        f = FIELDS[name]
+        if name not in fields and not name.startswith("DF001"):
+            raise EncodeError(f"message {msg_type}: field {name} ({f.what}) missing")
+        v = np.broadcast_to(np.asarray(fields.get(name, 0)), (nrx,))
+        if f.scale is None:
+            if v.dtype.kind == "f" and not np.all(v == np.rint(v)):
+                raise EncodeError(f"message {msg_type}: {name} expects integers")
+            raw = v.astype(np.int64)
+        else:
+            raw = np.rint(v.astype(np.float64) / f.scale)
+            if not np.all(np.isfinite(raw)):
+                raise EncodeError(f"message {msg_type}: {name} is not finite")
+            raw = raw.astype(np.int64)
+        if raw.min() < f.raw_min or raw.max() > f.raw_max:
+            raise EncodeError(f"message {msg_type}: {name} ({f.what}) outside [{f.raw_min}, {f.raw_max}] steps")
+        if f.kind is Kind.SIGN_MAG:
+            raw = np.where(raw < 0, (1 << (f.width - 1)) | -raw, raw)
+        raw = raw & ((1 << f.width) - 1)  # two's complement bits as sent
+        shift = f.width
+        for w in _split(f.width):  # a 38-bit coordinate goes as 32 + 6 bits
+            shift -= w
+            cols.append((raw >> shift) & ((1 << w) - 1))
+            widths.append(w)
+    frames = _frame_rows(_pack_columns(np.stack(cols), tuple(widths)))
+    offsets = np.arange(nrx + 1, dtype=np.int64) * frames.shape[1]
+    return EncodedBatch(frames.tobytes(), offsets)
+
+
 def encode_msm_batch(
     system: str,
     level: int,
@@ -134,6 +198,9 @@ def encode_msm_batch(
     smoothing_interval: int = 0,
 ) -> EncodedBatch:
     """Framed MSM (level 4..7) for each receiver: observables (nrx, nsat, nsig), ids/epochs (nrx,).
+
+    ``epochs`` is the MSM epoch field: time of week [ms] in the system's own time scale (BDT, i.e.
+    GPST - 14 s, for BeiDou), or (day << 27) | tk for GLONASS.
 
     Satellites and signals without a cell are left out of each receiver's masks, exactly as in
     ``observables_to_msm``. Raises ``EncodeError`` when a receiver has more than 64 cells (split the
@@ -252,17 +319,7 @@ def encode_msm_batch(
                         dst[...] = src
                 widths.extend([f.width] * count)
                 row += count
-        payload = _pack_columns(values, tuple(widths))
-        nbytes = payload.shape[1]
-        frames = np.empty((n, nbytes + FRAME_OVERHEAD_BYTES), dtype=np.uint8)
-        frames[:, 0] = PREAMBLE
-        frames[:, 1] = nbytes >> 8
-        frames[:, 2] = nbytes & 0xFF
-        frames[:, 3 : 3 + nbytes] = payload
-        crc = crc24q_rows(frames[:, : 3 + nbytes])
-        frames[:, -3] = crc >> 16
-        frames[:, -2] = (crc >> 8) & 0xFF
-        frames[:, -1] = crc & 0xFF
+        frames = _frame_rows(_pack_columns(values, tuple(widths)))
         frame_len[rx] = frames.shape[1]
         packed.append((rx, frames))
 
