@@ -58,6 +58,16 @@ SUPPORTED_SYSTEMS = tuple(SYSTEM_BANDS)
 LLI_SLIP = 1
 LLI_HALF_CYCLE = 2
 
+# Plausibility limits for raw observables; anything outside is treated as missing, not used.
+# Ranges from the ground to GNSS satellites: 19,100 km (GPS at zenith) to ~42,000 km (BDS GEO at the
+# horizon), plus receiver clock offsets of up to a millisecond (300 km) either way.
+MIN_PSEUDORANGE_M = 1.0e7
+MAX_PSEUDORANGE_M = 6.0e7
+# RINEX F14.3 cannot hold more than 1e10; a phase of exactly 0 is how several receivers say "none".
+MAX_ABS_PHASE_CYC = 1.0e10
+# Doppler of a satellite seen from a train: < 6 kHz; 1e5 Hz leaves room and rejects garbage.
+MAX_ABS_DOPPLER_HZ = 1.0e5
+
 
 @dataclass
 class ObsArrays:
@@ -93,6 +103,15 @@ class EpochObs:
     @property
     def n_slots(self) -> int:
         return self.code_m.shape[1]
+
+    def sanitised(self) -> "EpochObs":
+        """A copy with implausible values (non-finite, out of range, phase exactly 0) set missing."""
+        code = np.where((self.code_m > MIN_PSEUDORANGE_M) & (self.code_m < MAX_PSEUDORANGE_M), self.code_m, np.nan)
+        ph = self.phase_cyc
+        phase = np.where(np.isfinite(ph) & (np.abs(ph) < MAX_ABS_PHASE_CYC) & (ph != 0.0), ph, np.nan)
+        dop = np.where(np.abs(self.doppler_hz) < MAX_ABS_DOPPLER_HZ, self.doppler_hz, np.nan)
+        snr = np.where(np.isfinite(self.snr_dbhz), self.snr_dbhz, np.nan)
+        return EpochObs(float(self.time), self.sats, code, phase, dop, snr, self.lli, self.wavelength_m, self.signal)
 
     def take(self, index) -> "EpochObs":
         idx = np.asarray(index)

@@ -84,6 +84,9 @@ HOLD_AFTER_FIXES = 5
 HOLD_VARIANCE_CYC2 = 0.001
 # A time step longer than this [s] restarts the position/velocity part of the filter.
 MAX_PREDICTION_GAP_S = 30.0
+# The float position may differ from the epoch's SPP by the SPP's error; beyond this [m] plus five
+# SPP sigmas the filter has gone wrong.
+SPP_CONSISTENCY_M = 30.0
 # Fixed solutions whose DD phase residuals exceed this [m] are rejected (wrong fix).
 MAX_FIXED_PHASE_RESIDUAL_M = 0.05
 SOLUTION_STATUS_NAMES = {Status.NONE: "none", Status.FIX: "fix", Status.FLOAT: "float", Status.SINGLE: "single"}
@@ -201,6 +204,12 @@ class RtkFilter:
         `base_time` is the base epoch's time when it differs from `base.time` (never needed for
         RINEX); the age of corrections is rover time minus base time.
         """
+        if not np.isfinite(rover.time):
+            return RtkSolution(math.nan, Status.NONE, np.full(3, np.nan), np.full((3, 3), np.nan),
+                               message="rover epoch without a valid time")
+        rover = rover.sanitised()
+        if base is not None:
+            base = base.sanitised() if np.isfinite(base.time) else None
         try:
             # Small matrices: BLAS threads cost far more than they save (15x slower on 2 busy cores).
             with _blas_controller().limit(limits=1, user_api="blas"):
@@ -228,6 +237,8 @@ class RtkFilter:
         t = rover.time
         spp = solve_spp(rover, self.nav, self._spp_options(),
                         initial_m=self.x[:3] if self.initialised else None)
+        if not spp.ok and self.initialised:
+            spp = solve_spp(rover, self.nav, self._spp_options())  # the filter's position may be the problem
         if base is None:
             self._time_update(t, spp, advance_only=True)
             return self._single(t, spp, "no base observations")
@@ -362,8 +373,8 @@ class RtkFilter:
         ro = rover.take(ri)
         bo = base.take(bi)
         slips = rslip[ri, :nf] | bslip[bi, :nf]
-        sp_r = satellite_positions(self.nav, ro.sats, t, ro.code_m[:, 0] if nf else None)
-        sp_b = satellite_positions(self.nav, bo.sats, bo.time, bo.code_m[:, 0])
+        sp_r = satellite_positions(self.nav, ro.sats, t, _any_code(ro))
+        sp_b = satellite_positions(self.nav, bo.sats, bo.time, _any_code(bo), t_select=t)
         valid = sp_r.valid & sp_b.valid
         # same issue of data at both ends, or the orbit error does not cancel
         valid &= sp_r.ephemeris_index == sp_b.ephemeris_index
@@ -445,6 +456,13 @@ class RtkFilter:
         if not np.all(np.isfinite(float_pos)) or np.trace(float_cov) > 1e6:
             self.reset()
             return self._single(t, spp, "filter diverged, restarted", age)
+        if spp.ok:
+            # The float solution must agree with the epoch's own code solution; when it does not, the
+            # filter has absorbed bad data: restart it rather than report a confident wrong position.
+            gap = float(np.linalg.norm(float_pos - spp.position_m))
+            if gap > SPP_CONSISTENCY_M + 5.0 * math.sqrt(max(np.trace(spp.covariance_m2), 0.0)):
+                self.reset()
+                return self._single(t, spp, f"filter {gap:.0f} m from SPP, restarted", age)
         if opt.ambiguity_resolution:
             self._resolve(sol, groups, ro, sd_phase, los_r, wl, x_rov)
         return sol
@@ -618,6 +636,15 @@ class RtkFilter:
 
     def _float_or_single(self, t, spp, age, n, msg) -> RtkSolution:
         return self._single(t, spp, msg, age)
+
+
+def _any_code(obs: EpochObs) -> np.ndarray:
+    """The first available pseudorange per satellite (for the transmission time only, where a metre
+    of difference between signals moves the satellite by 13 micrometres)."""
+    out = obs.code_m[:, 0].copy()
+    for f in range(1, obs.code_m.shape[1]):
+        out = np.where(np.isnan(out), obs.code_m[:, f], out)
+    return out
 
 
 _BLAS_CONTROLLER: ThreadpoolController | None = None

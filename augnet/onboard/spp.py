@@ -79,12 +79,14 @@ class SatPositions(NamedTuple):
     accuracy_m: np.ndarray  # (N,) broadcast URA/SISA
 
 
-def satellite_positions(nav: NavigationData, sats: Sequence[str], t_obs: float, pseudorange_m) -> SatPositions:
+def satellite_positions(nav: NavigationData, sats: Sequence[str], t_obs: float, pseudorange_m,
+                        t_select: float | None = None) -> SatPositions:
     """Satellite states at signal transmission, from the receiver time tag and the pseudorange.
 
     t_tx = t_obs - P/c - dt_sat: the receiver clock error is inside P, so it need not be known
-    (the same approach as every RINEX post-processor).  Ephemerides are selected at t_obs so base
-    and rover of the same epoch use the same issue of data.
+    (the same approach as every RINEX post-processor).  Ephemerides are selected at `t_select`
+    (default t_obs); RTK passes the rover's time for the base too, so both ends use the same issue
+    of data even when a new set's toe falls between their time tags.
     """
     sats = list(sats)
     n = len(sats)
@@ -92,7 +94,7 @@ def satellite_positions(nav: NavigationData, sats: Sequence[str], t_obs: float, 
     if n == 0 or len(nav) == 0:
         z = np.zeros((n, 3))
         return SatPositions(z, z, np.zeros(n), np.zeros(n), np.full(n, -1), np.zeros(n, bool), np.zeros(n))
-    idx = nav.select(sats, t_obs)
+    idx = nav.select(sats, t_obs if t_select is None else t_select)
     valid = (idx >= 0) & np.isfinite(pr)
     rows = nav.table.take(np.where(valid, idx, 0))
     t = np.full(n, float(t_obs))
@@ -165,7 +167,15 @@ def _solve(obs: EpochObs, nav: NavigationData, opt: SppOptions, initial_m) -> Sp
     if n == 0:
         return _fail(obs.time, n, "no observations")
     sys_ = np.array([s[0] for s in obs.sats])
-    pr = obs.code_m[:, 0].copy()
+    obs = obs.sanitised()
+    # slot 0 (L1/E1/B1I) code, or the next slot's where slot 0 is missing (its own group delay and
+    # ionospheric scaling follow from the signal)
+    slot = np.zeros(n, dtype=int)
+    for f in range(1, obs.code_m.shape[1]):
+        slot = np.where(np.isnan(obs.code_m[np.arange(n), slot]) & np.isfinite(obs.code_m[:, f]), f, slot)
+    rows_n = np.arange(n)
+    pr = obs.code_m[rows_n, slot].copy()
+    signal = obs.signal[rows_n, slot]
     usable = np.isfinite(pr) & np.isin(sys_, list(opt.systems)) & (pr > 1.0e7) & (pr < 6.0e7)
     sp = satellite_positions(nav, obs.sats, obs.time, np.where(usable, pr, np.nan))
     usable &= sp.valid
@@ -173,18 +183,20 @@ def _solve(obs: EpochObs, nav: NavigationData, opt: SppOptions, initial_m) -> Sp
     tgd = np.zeros(n)
     if np.any(sp.valid):
         rows = nav.table.take(np.where(sp.valid, sp.ephemeris_index, 0))
-        for sig in np.unique(obs.signal[:, 0]):
+        for sig in np.unique(signal):
             if sig:
-                m = obs.signal[:, 0] == sig
+                m = signal == sig
                 gd = group_delay_s(rows, sig)
                 tgd = np.where(m & np.isfinite(gd), gd, tgd)
     freq0 = np.array([BAND_FREQ_HZ.get((s[0], sig[:1]), FREQ_L1_HZ) if sig else FREQ_L1_HZ
-                      for s, sig in zip(obs.sats, obs.signal[:, 0])])
+                      for s, sig in zip(obs.sats, signal)])
     iono_scale = (FREQ_L1_HZ / freq0) ** 2
     alpha = opt.klobuchar_alpha
     beta = opt.klobuchar_beta
 
-    x = np.zeros(3) if initial_m is None or not np.all(np.isfinite(initial_m)) else np.array(initial_m, float)
+    x = np.zeros(3)
+    if initial_m is not None and np.all(np.isfinite(initial_m)) and 6.0e6 < np.linalg.norm(initial_m) < 6.5e6:
+        x = np.array(initial_m, dtype=float)  # a plausible starting point near the surface
     excluded: list[str] = []
     exclude_mask = np.zeros(n, bool)
     for _raim_round in range(3):
