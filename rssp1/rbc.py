@@ -204,6 +204,7 @@ class RbcSimulator:
         self._seen_alarm_ids: OrderedDict[int, None] = OrderedDict()
         self._episodes: set[AlarmCode] = set()  # watchdog alarms active (raised once per episode)
         self._last_report_seq = 0
+        self._dnu_alarmed: set[int] = set()  # sections reported DO_NOT_USE whose alarm is raised
 
     # -- the effective picture, fail-safe
     def effective_status(self, section_id: int) -> SectionStatus:
@@ -242,10 +243,11 @@ class RbcSimulator:
     def _apply(self, data: bytes) -> None:
         for msg in decode_payload(data, self.stats).messages:
             if isinstance(msg, IntegrityStatus):
-                for s in msg.sections:
-                    before = self.effective_status(s.section_id) if self.fresh else None
-                    if s.status is SectionStatus.DO_NOT_USE and before is not SectionStatus.DO_NOT_USE:
-                        self._alarm(AlarmCode.SECTION_DO_NOT_USE, s.section_id, "status")
+                # one alarm per transition to DO_NOT_USE as reported, whatever the freshness meanwhile
+                reported_dnu = {s.section_id for s in msg.sections if s.status is SectionStatus.DO_NOT_USE}
+                for section_id in sorted(reported_dnu - self._dnu_alarmed):
+                    self._alarm(AlarmCode.SECTION_DO_NOT_USE, section_id, "status")
+                self._dnu_alarmed = reported_dnu
                 self.view.reported = {s.section_id: s for s in msg.sections}
                 self.view.report_cycle = self.local_cycle
                 self._last_report_seq = msg.report_seq

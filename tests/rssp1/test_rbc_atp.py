@@ -73,6 +73,21 @@ def test_section_do_not_use_raises_an_rbc_alarm_in_the_next_cycle():
     assert len(rbc.alarms) == 1  # raised once, not every cycle
 
 
+def test_one_section_alarm_per_transition_even_while_not_fresh():
+    centre, rbc, net = rbc_pair(max_correction_age_s=0.5)
+    centre.set_section(5, SectionStatus.DO_NOT_USE)
+    centre.set_section(6, SectionStatus.OK)
+    centre.corrections_updated(1_000, produced_at_s=net.now)
+    net.step(20)  # corrections go stale after 2 cycles and stay stale
+    assert rbc.first_alarm(AlarmCode.CORRECTION_STALE) is not None
+    assert [a.section_id for a in rbc.alarms if a.code is AlarmCode.SECTION_DO_NOT_USE] == [5]
+    centre.set_section(5, SectionStatus.OK)
+    net.step(2)
+    centre.set_section(5, SectionStatus.DO_NOT_USE)
+    net.step(2)
+    assert [a.section_id for a in rbc.alarms if a.code is AlarmCode.SECTION_DO_NOT_USE] == [5, 5]
+
+
 def test_centre_alarms_repeat_until_acknowledged_and_are_deduplicated():
     centre, rbc, net = rbc_pair()
     centre.set_section(1, SectionStatus.OK)
