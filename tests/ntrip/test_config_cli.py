@@ -8,7 +8,6 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
@@ -142,7 +141,7 @@ def test_serve_subprocess_stats_file_and_sigterm(tmp_path):
             assert proc.poll() is None and time.monotonic() < deadline
             time.sleep(0.05)
         port = int(ready.read_text())
-        src = open_v1_source(port, "BASE01", password="pw")
+        src = open_v1_source(port, "BASE01", password="pw")  # noqa: F841 - keeps BASE01 live
         c, head = open_client(port, "BASE01", user="train1", password="pw")
         assert head == b"ICY 200 OK\r\n"
         deadline = time.monotonic() + 10

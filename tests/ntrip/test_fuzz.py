@@ -3,7 +3,6 @@ and the live caster answers garbage with an error (or the sourcetable) and a clo
 
 from __future__ import annotations
 
-import socket
 
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st

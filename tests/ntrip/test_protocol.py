@@ -14,7 +14,6 @@ from ntrip_caster.errors import NtripProtocolError
 from ntrip_caster.gga import NmeaLineSplitter, format_gga, great_circle_m, parse_gga
 from ntrip_caster.limits import MAX_NMEA_LINE_BYTES, MAX_REQUEST_HEAD_BYTES
 from ntrip_caster.reposition import RepositionPolicy, choose_base
-from ntrip_caster.request import parse_request_head
 from ntrip_caster.response import error_response, sourcetable_response, stream_ok
 from ntrip_caster.rtcm_frames import RtcmFrameAligner, crc24q, frame_rtcm3, split_rtcm3_frames
 from ntrip_caster.sourcetable import StrRecord, parse_sourcetable, render_sourcetable

@@ -5,11 +5,9 @@ from __future__ import annotations
 import socket
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import replace
 
 import pytest
 
-from ntrip_caster.auth import PUBLIC
 from ntrip_caster.chunked import encode_chunk
 from ntrip_caster.config import Limits, MountConfig
 from ntrip_caster.embedded import CasterThread
@@ -314,7 +312,8 @@ def test_unknown_sources_allowed_when_configured():
     with CasterThread(make_config(allow_unknown_sources=True)) as ct:
         s = connect(ct.port)
         s.sendall(b"SOURCE anything NEWMOUNT\r\nSource-Agent: NTRIP x\r\n"
-                  b"STR: STR;NEWMOUNT;Shanghai;RTCM 3.2;1005(10);2;GPS;NET;CHN;31.10;121.20;0;0;x;none;N;N;9600;\r\n\r\n")
+                  b"STR: STR;NEWMOUNT;Shanghai;RTCM 3.2;1005(10);2;GPS;NET;CHN;31.10;121.20;0;0;x;"
+                  b"none;N;N;9600;\r\n\r\n")
         assert read_until(s, b"\r\n") == b"ICY 200 OK\r\n"
         c = connect(ct.port)
         c.sendall(b"GET / HTTP/1.0\r\n\r\n")
