@@ -100,7 +100,7 @@ class OnboardAtpLink:
 
 @dataclass(frozen=True)
 class AtpEvent:
-    kind: str  # "passage" or an alarm name
+    kind: str  # alarm name: LINK_LOST, UNKNOWN_BALISE, MAP_MISMATCH, PASSAGE_ORDER, INTEGRITY_LOST
     at_s: float
     telegram: VirtualBaliseTelegram | None = None
 
