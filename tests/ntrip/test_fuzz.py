@@ -3,7 +3,9 @@ and the live caster answers garbage with an error (or the sourcetable) and a clo
 
 from __future__ import annotations
 
+import time
 
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -14,7 +16,7 @@ from ntrip_caster.config import Limits
 from ntrip_caster.embedded import CasterThread
 from ntrip_caster.limits import MAX_REQUEST_HEAD_BYTES
 
-from .helpers import basic, connect, make_config, open_client, open_v1_source, read_all
+from .helpers import basic, connect, make_config, open_client, open_v1_source, read_all, read_until
 
 ALLOWED_STATUS = {400, 401, 404, 408, 409, 431, 501, 505}
 REAL_REQUESTS = [
@@ -118,5 +120,72 @@ def test_live_caster_answers_garbage_and_stays_healthy():
         assert snap["counters"]["status_408"] == 1 and snap["counters"]["status_501"] == 1
         c, head = open_client(ct.port, "OPEN", user=None)
         assert head == b"ICY 200 OK\r\n"
+        c.close()
+        src.close()
+
+
+@pytest.fixture(scope="module")
+def fuzz_caster():
+    with CasterThread(make_config(limits=Limits(request_head_timeout_s=0.25))) as ct:
+        yield ct
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                 HealthCheck.function_scoped_fixture])
+@given(st.lists(st.sampled_from(TOKENS), max_size=40), st.binary(max_size=200))
+def test_live_caster_fuzzed_requests_always_answered(fuzz_caster, tokens, tail):
+    """Whatever arrives, the caster answers (an error, the sourcetable, or a stream reply) or
+    closes within the head timeout; it never hangs and never dies."""
+    wire = b"".join(tokens) + tail
+    s = connect(fuzz_caster.port)
+    try:
+        s.sendall(wire)
+    except OSError:
+        pass
+    t0 = time.monotonic()
+    s.settimeout(3)
+    reply = b""
+    try:
+        while True:
+            data = s.recv(65536)
+            if not data:
+                break
+            reply += data
+            if reply.startswith((b"ICY 200 OK", b"HTTP/1.1 200 OK")):
+                break  # a stream was granted (e.g. a valid GET on a public mount): fine
+    except (ConnectionResetError, TimeoutError):
+        pass
+    s.close()
+    assert time.monotonic() - t0 < 3, "no answer and no close within 3 s"
+    if reply:
+        first = reply.split(b"\r\n", 1)[0]
+        assert first.startswith((b"SOURCETABLE 200", b"ERROR - ", b"ICY 200 OK", b"HTTP/1.1 200")) \
+            or int(first.split(b" ")[1]) in ALLOWED_STATUS, reply[:80]
+    snap = fuzz_caster.snapshot(clients=False)
+    assert snap["counters"].get("internal_errors", 0) == 0
+
+
+def test_many_slow_loris_connections_do_not_starve_real_clients():
+    with CasterThread(make_config(limits=Limits(request_head_timeout_s=1.0))) as ct:
+        src = open_v1_source(ct.port, "OPEN")
+        loris = []
+        for _ in range(200):
+            s = connect(ct.port)
+            s.sendall(b"GET /OPEN HTTP/1.0\r\nUser-Agent: NT")  # and then a byte now and then
+            loris.append(s)
+        c, head = open_client(ct.port, "OPEN", user=None)
+        assert head == b"ICY 200 OK\r\n"
+        src.sendall(b"\xd3\x00\x00G\xeaK")
+        assert read_until(c, b"G\xeaK") == b"\xd3\x00\x00G\xeaK"
+        t0 = time.monotonic()
+        for s in loris[:20]:  # dribbling does not extend the deadline
+            s.sendall(b"R")
+        closed = 0
+        for s in loris:
+            reply = read_all(s, timeout=5)
+            closed += reply.startswith(b"HTTP/1.0 408")
+            s.close()
+        assert closed == 200 and time.monotonic() - t0 < 5
+        assert ct.snapshot(clients=False)["counters"]["head_timeouts"] == 200
         c.close()
         src.close()
