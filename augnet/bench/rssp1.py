@@ -112,16 +112,44 @@ def stdlib_c_crc_rate(size: int) -> tuple[float, float]:
     return _best(run, FRAMES)
 
 
-def main() -> None:
-    print(f"RSSP-I frames encoded + verified per second, one core, best of {TRIALS}; goal {GOAL_FRAMES_PER_S:,}")
+def measure() -> dict:
+    """Every path for every payload size: {"results": {size: {path: {"wall": fps, "cpu": fps}}}, ...}."""
+    results: dict[str, dict[str, dict[str, float]]] = {}
+    for size in PAYLOAD_SIZES:
+        rates = {
+            "codec": codec_rate(size),
+            "endpoint": endpoint_rate(size),
+            "sealed": endpoint_rate(size, True),
+            "C CRCs (peer)": stdlib_c_crc_rate(size),
+        }
+        results[str(size)] = {k: {"wall": w, "cpu": c} for k, (w, c) in rates.items()}
+    return {"goal_frames_per_s": GOAL_FRAMES_PER_S, "trials": TRIALS, "results": results}
+
+
+def print_table(result: dict) -> None:
+    print(f"RSSP-I frames encoded + verified per second, one core, best of {result['trials']}; "
+          f"goal {result['goal_frames_per_s']:,}")
     print("figures are wall-clock / CPU-time of this process (they differ when other work shares the core)")
     print(f"{'data bytes':>10} {'codec':>17} {'endpoint':>17} {'sealed endpoint':>17} {'peer: C CRCs':>19}")
-    for size in PAYLOAD_SIZES:
-        rates = [codec_rate(size), endpoint_rate(size), endpoint_rate(size, True), stdlib_c_crc_rate(size)]
-        cells = [f"{w:>8,.0f}/{c:<8,.0f}" for w, c in rates]
-        codec_cpu, peer_cpu = rates[0][1], rates[3][1]
+    for size, rows in result["results"].items():
+        cells = [f"{r['wall']:>8,.0f}/{r['cpu']:<8,.0f}" for r in rows.values()]
+        codec_cpu, peer_cpu = rows["codec"]["cpu"], rows["C CRCs (peer)"]["cpu"]
         print(f"{size:>10} {cells[0]:>17} {cells[1]:>17} {cells[2]:>17} {cells[3]:>19}   "
-              f"codec {codec_cpu / GOAL_FRAMES_PER_S:.2f}x goal, {codec_cpu / peer_cpu:.3f}x C CRCs (CPU time)")
+              f"codec {codec_cpu / result['goal_frames_per_s']:.2f}x goal, "
+              f"{codec_cpu / peer_cpu:.3f}x C CRCs (CPU time)")
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Print the table (or, with --json, the figures as JSON)."""
+    import json
+    import sys
+
+    args = sys.argv[1:] if argv is None else argv
+    result = measure()
+    if "--json" in args:
+        print(json.dumps(result))
+    else:
+        print_table(result)
 
 
 if __name__ == "__main__":
