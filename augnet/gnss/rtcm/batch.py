@@ -312,7 +312,9 @@ def encode_msm_batch(
                 if arr is None:
                     dst[...] = 0
                 else:
-                    src = (arr if all_rx else arr[rx]).reshape(n, -1).T[sel]
+                    src = (arr if all_rx else arr[rx]).reshape(n, -1).T
+                    if len(sel) != src.shape[0]:  # some satellites / cells absent: select rows
+                        src = src[sel]
                     if f.kind.value == "i":
                         np.bitwise_and(src, (1 << f.width) - 1, out=dst)
                     else:
