@@ -21,7 +21,7 @@ from pathlib import Path
 from rssp1.checkword import timestamp_from_svc
 from rssp1.config import DeviceConfig, LinkTiming
 from rssp1.endpoint import DataReceived, Endpoint, FrameDropped, LinkDown, LinkState
-from rssp1.frames import RSD_TYPES, TYPE_SSE, TYPE_SSR, FrameError, Rsd, decode_frame
+from rssp1.frames import RSD_TYPES, TYPE_SSE, TYPE_SSR, FrameError, Rsd, Sse, decode_frame
 from rssp1.pcapng import CaptureStats, udp_datagrams
 from rssp1.sid_recovery import recover_sid
 from rssp1.timestamp import timestamp_at
@@ -126,7 +126,7 @@ def inspect_captures(
                 by_path[key].append((dgram.timestamp_s, payload))
                 report.first_tc = frame.tc if report.first_tc is None else min(report.first_tc, frame.tc)
                 report.last_tc = frame.tc if report.last_tc is None else max(report.last_tc, frame.tc)
-            elif frame.__class__.__name__ == "Sse":
+            elif isinstance(frame, Sse):
                 report.sse += 1
             else:
                 report.ssr += 1

@@ -8,7 +8,7 @@ import socket
 import pytest
 
 from rssp1.config import LinkTiming, link_config_from_mapping
-from rssp1.endpoint import Endpoint
+from rssp1.endpoint import DataReceived, Endpoint
 from rssp1.frames import TYPE_RSD_B, CATEGORY_STANDBY
 from rssp1.transport import EndpointNode, UdpLink
 
@@ -105,7 +105,7 @@ def test_udp_dual_network_copies_are_taken_once():
             for t in tasks:
                 t.cancel()
             await asyncio.gather(*tasks, return_exceptions=True)
-        data = [e.data for e in got if type(e).__name__ == "DataReceived"]
+        data = [e.data for e in got if isinstance(e, DataReceived)]
         assert len(data) >= 20 and rbc_ep.stats["rx_rsd_ok"] == len(data)
         # every accepted frame's twin was dropped as a repeat (the first copies during sync excepted)
         assert rbc_ep.stats["dropped_repeat"] >= len(data)

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from rssp1 import checkword
 from rssp1.config import DeviceConfig, LinkTiming
 from rssp1.crc import crc16
-from rssp1.endpoint import Endpoint, LinkState
+from rssp1.endpoint import DataReceived, Endpoint, LinkState
 from rssp1.frames import encode_rsd, encode_ssr
 from rssp1.timestamp import timestamp_at
 
@@ -38,7 +38,7 @@ def test_link_comes_up_and_carries_data_both_ways():
     assert pair.bring_up() <= 3
     events = drive(pair, 50)
     assert received(events) == [b"msg%04d" % i for i in range(pair.cycle_no - 50, pair.cycle_no)]
-    assert sum(1 for e in pair.a_events if type(e).__name__ == "DataReceived") >= 50
+    assert sum(1 for e in pair.a_events if isinstance(e, DataReceived)) >= 50
     assert downs(pair.b_events) == [] and pair.b.stats["link_up"] == 1
     assert pair.b.stats["tx_sse"] == 1 and pair.a.stats["tx_ssr"] == 1
 
@@ -234,7 +234,7 @@ def test_delay_within_limits_is_accepted_beyond_limits_drops_the_link_until_it_e
     # long DelayTime to the gap rule, as the stale frames leave last-accepted TC further behind.
     assert downs(events) == (["timeout"] if timing is FIELD else ["gap"])
     assert pair.b.stats["dropped_late"] >= 1
-    accepted_tcs = [e.tc for e in events if type(e).__name__ == "DataReceived"]
+    accepted_tcs = [e.tc for e in events if isinstance(e, DataReceived)]
     assert all(tc - 1000 < 20 + 8 for tc in accepted_tcs)  # nothing sent after the delay passed 3
     # SSE -> SSR round trips of 8+ cycles exceed lifeTime (4): never resynchronised while delayed
     assert pair.b.stats["dropped_ssr_stale"] + pair.b.stats["dropped_ssr_unexpected"] >= 3
