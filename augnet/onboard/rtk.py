@@ -84,6 +84,9 @@ HOLD_AFTER_FIXES = 5
 HOLD_VARIANCE_CYC2 = 0.001
 # A time step longer than this [s] restarts the position/velocity part of the filter.
 MAX_PREDICTION_GAP_S = 30.0
+# Fixed solutions failing the residual check are retried this many times, each without the worst
+# satellite (RTKLIB-EX and commercial engines exclude satellites the same way).
+AR_EXCLUSION_RETRIES = 3
 # The float position may differ from the epoch's SPP by the SPP's error; beyond this [m] plus five
 # SPP sigmas the filter has gone wrong.
 SPP_CONSISTENCY_M = 30.0
@@ -557,82 +560,89 @@ class RtkFilter:
         self.P = 0.5 * (self.P + self.P.T)
 
     def _resolve(self, sol: RtkSolution, groups, ro, sd_phase, los, wl, x_lin) -> None:
+        """Integer ambiguity resolution on this epoch's DD ambiguities; on success `sol` becomes FIX.
+
+        A fixed solution must leave DD phase residuals at the noise level.  When it does not, one
+        satellite's phase is usually at fault (multipath, a slip too small to detect): the worst row
+        is left out and the search repeated, up to AR_EXCLUSION_RETRIES times.
+        """
         opt = self.opt
-        # DD ambiguity transform over the SD ambiguity states of this epoch
-        amb_states = []
-        D_rows = []
+        rows = []  # (state index, reference state index, epoch sat index, ref sat index, slot)
         for g in groups:
-            ref_key = (str(ro.sats[g.sats[0]]), g.slot)
-            iref = self.amb_index[ref_key]
+            ref = g.sats[0]
+            iref = self.amb_index[(str(ro.sats[ref]), g.slot)]
             for k in g.sats[1:]:
-                i = self.amb_index[(str(ro.sats[k]), g.slot)]
-                D_rows.append((i, iref))
-        if len(D_rows) < opt.min_fix_ambiguities:
-            self.consecutive_fixes = 0
-            sol.message = "float: too few ambiguities to fix"
-            return
-        idx = sorted({i for pair in D_rows for i in pair})
+                rows.append((self.amb_index[(str(ro.sats[k]), g.slot)], iref, k, ref, g.slot))
+        n_all = len(rows)
+        message = ""
+        for _attempt in range(AR_EXCLUSION_RETRIES + 1):
+            if len(rows) < opt.min_fix_ambiguities:
+                message = message or "float: too few ambiguities to fix"
+                break
+            result = self._try_fix(rows, sd_phase, los, wl, x_lin)
+            if isinstance(result, str):
+                message = result
+                break
+            fix, Hc, x_fix, P_fix, res = result
+            worst = int(np.argmax(np.abs(res)))
+            if abs(res[worst]) <= MAX_FIXED_PHASE_RESIDUAL_M:
+                self._accept_fix(sol, fix, Hc, x_fix, P_fix, n_all)
+                return
+            message = f"float: fixed solution rejected (phase residual {abs(res[worst]) * 100:.1f} cm)"
+            # leave the worst satellite out (its reference too if every row of the group is bad)
+            rows = [r for j, r in enumerate(rows) if j != worst]
+        self.consecutive_fixes = 0
+        sol.message = message
+
+    def _try_fix(self, rows, sd_phase, los, wl, x_lin):
+        opt = self.opt
+        idx = sorted({r[0] for r in rows} | {r[1] for r in rows})
         pos = {i: c for c, i in enumerate(idx)}
-        D = np.zeros((len(D_rows), len(idx)))
-        for r, (i, iref) in enumerate(D_rows):
-            D[r, pos[i]] = 1.0
-            D[r, pos[iref]] = -1.0
-        xa = self.x[idx]
-        Paa = self.P[np.ix_(idx, idx)]
-        a_dd = D @ xa
-        Q_dd = D @ Paa @ D.T
+        D = np.zeros((len(rows), len(idx)))
+        for r, row in enumerate(rows):
+            D[r, pos[row[0]]] = 1.0
+            D[r, pos[row[1]]] = -1.0
+        a_dd = D @ self.x[idx]
+        Q_dd = D @ self.P[np.ix_(idx, idx)] @ D.T
         try:
             fix = partial_fix(a_dd, Q_dd, min_success_rate=opt.min_success_rate,
                               ratio_threshold=opt.ratio_threshold, min_count=opt.min_fix_ambiguities)
         except AmbiguityError as exc:
-            self.consecutive_fixes = 0
-            sol.message = f"float: ambiguity covariance unusable ({exc})"
-            return
+            return f"float: ambiguity covariance unusable ({exc})"
         if fix is None:
-            self.consecutive_fixes = 0
-            sol.message = "float: no ambiguity subset passed ratio and success-rate tests"
-            return
-        # constraint Zs^T D a_sd = z on the full state
-        nx = len(self.x)
-        Hc = np.zeros((fix.count, nx))
+            return "float: no ambiguity subset passed ratio and success-rate tests"
+        # the constraint Zs^T D a_sd = z on the full state (conditional mean and covariance)
+        Hc = np.zeros((fix.count, len(self.x)))
         Hc[:, idx] = fix.Zs.T @ D
         S = Hc @ self.P @ Hc.T
         try:
             K = np.linalg.solve(S, Hc @ self.P).T
         except np.linalg.LinAlgError:
-            sol.message = "float: fixed-ambiguity constraint singular"
-            return
+            return "float: fixed-ambiguity constraint singular"
         x_fix = self.x - K @ (Hc @ self.x - fix.z_fixed)
         P_fix = self.P - K @ Hc @ self.P
-        # validate: DD phase residuals with the fixed state must be at noise level
-        dx = x_fix[:3] - x_lin  # the phase residuals were formed at the linearisation point
-        max_res = 0.0
-        for g in groups:
-            ref = g.sats[0]
-            iref = self.amb_index[(str(ro.sats[ref]), g.slot)]
-            for k in g.sats[1:]:
-                i = self.amb_index[(str(ro.sats[k]), g.slot)]
-                y = sd_phase[k, g.slot] - sd_phase[ref, g.slot]
-                pred = -(los[k] - los[ref]) @ dx + wl[k, g.slot] * x_fix[i] - wl[ref, g.slot] * x_fix[iref]
-                max_res = max(max_res, abs(y - pred))
-        if max_res > MAX_FIXED_PHASE_RESIDUAL_M:
-            self.consecutive_fixes = 0
-            sol.message = f"float: fixed solution rejected (phase residual {max_res * 100:.1f} cm)"
-            return
+        # DD phase residuals of the fixed state, formed at the linearisation point
+        dx = x_fix[:3] - x_lin
+        r = np.array(rows)
+        i, iref, k, ref, f = (r[:, c].astype(int) for c in range(5))
+        y = sd_phase[k, f] - sd_phase[ref, f]
+        pred = -np.einsum("ij,j->i", los[k] - los[ref], dx) + wl[k, f] * x_fix[i] - wl[ref, f] * x_fix[iref]
+        return fix, Hc, x_fix, P_fix, y - pred
+
+    def _accept_fix(self, sol, fix, Hc, x_fix, P_fix, n_all) -> None:
         sol.status = Status.FIX
         sol.position_m = x_fix[:3].copy()
         sol.covariance_m2 = 0.5 * (P_fix[:3, :3] + P_fix[:3, :3].T)
         sol.ratio = float(min(fix.ratio, 999.9))
         sol.success_rate = float(fix.success_rate)
         sol.n_fixed = fix.count
-        sol.message = f"fix: {fix.count}/{len(D_rows)} ambiguities"
+        sol.message = f"fix: {fix.count}/{n_all} ambiguities"
         if self.n_kin == 9:
             sol.velocity_m_s = x_fix[3:6].copy()
         self.consecutive_fixes += 1
-        if opt.fix_and_hold and self.consecutive_fixes >= HOLD_AFTER_FIXES:
-            R = np.eye(fix.count) * HOLD_VARIANCE_CYC2
+        if self.opt.fix_and_hold and self.consecutive_fixes >= HOLD_AFTER_FIXES:
             v = fix.z_fixed - Hc @ self.x
-            self._kalman_update(v, Hc, R)
+            self._kalman_update(v, Hc, np.eye(fix.count) * HOLD_VARIANCE_CYC2)
 
     def _float_or_single(self, t, spp, age, n, msg) -> RtkSolution:
         return self._single(t, spp, msg, age)
