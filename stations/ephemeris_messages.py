@@ -74,6 +74,21 @@ def _sisa_index(accuracy_m: float) -> int:
     return 255
 
 
+# Angles that may take any value: wrapped into the signed semicircle range [-1, 1) the fields hold.
+WRAPPED_ANGLES = frozenset({"m0", "omega0", "omega"})
+
+
+def _field_value(attr: str, df: str, value: float) -> float:
+    """The field value of an attribute: scaled, angles wrapped so that +1 semicircle becomes -1."""
+    if attr not in WRAPPED_ANGLES:
+        return value
+    f = FIELDS[df]
+    raw = round(value / f.scale)
+    half = 1 << (f.width - 1)
+    raw = (raw + half) % (2 * half) - half  # +2^31 steps (exactly +pi) wraps to -2^31 (-pi)
+    return raw * f.scale
+
+
 def _quantised(df: str, value: float) -> float:
     f = FIELDS[df]
     return float(to_value(f, from_value(f, value)))
@@ -83,7 +98,7 @@ def quantise(eph: Ephemeris) -> Ephemeris:
     """The ephemeris with every orbit and clock parameter on its broadcast resolution."""
     changes = {}
     for attr, df, factor in ORBIT_FIELDS[eph.system]:
-        changes[attr] = _quantised(df, getattr(eph, attr) * factor) / factor
+        changes[attr] = _quantised(df, _field_value(attr, df, getattr(eph, attr) * factor)) / factor
     return eph.replace(**changes)
 
 
@@ -92,7 +107,7 @@ def ephemeris_message(eph: Ephemeris) -> RtcmMessage:
     s = eph.system
     fields: dict[str, object] = {}
     for attr, df, factor in ORBIT_FIELDS[s]:
-        fields[df] = getattr(eph, attr) * factor
+        fields[df] = _field_value(attr, df, getattr(eph, attr) * factor)
     if s == "G":
         fields.update(DF009=eph.prn, DF076=eph.week % 1024, DF077=_ura_index(eph.accuracy_m),
                       DF078=eph.codes_on_l2, DF071=eph.iode, DF085=eph.iodc, DF102=eph.health,
