@@ -180,3 +180,48 @@ def test_false_preamble_before_the_last_frame_is_resolved_at_close():
     assert r.feed(b"\xd3\x00\x50" + good) == []
     assert [f.raw for f in r.close()] == [good]
     assert r.stats.truncated_bytes == 3 and r.stats.frames_ok == 1
+
+
+@pytest.fixture(scope="module")
+def real_frames(shared_data):
+    return [f.raw for f in read_frames(shared_data / "rtcm" / "ntrip-USCL00CHL0.rtcm3").frames]
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_real_frames_survive_garbage_truncation_and_corruption(real_frames, seed):
+    # Each real frame is sent intact, truncated (the rest never comes), or with one bit flipped,
+    # with garbage (false preambles included) before it; fed in random chunks. Every intact frame
+    # must come out, in order; every damaged one must be counted, never returned.
+    rnd = random.Random(seed)
+    stream = b""
+    intact = []
+    damaged = 0
+    for raw in real_frames:
+        junk = bytes(rnd.choice((0xD3, rnd.randrange(256))) for _ in range(rnd.randrange(30)))
+        fate = rnd.choice(["intact", "intact", "truncated", "corrupted"])
+        if fate == "intact":
+            intact.append(raw)
+            stream += junk + raw
+        elif fate == "truncated":
+            damaged += 1
+            stream += junk + raw[: rnd.randrange(1, len(raw))]
+        else:
+            damaged += 1
+            bad = bytearray(raw)
+            bad[rnd.randrange(len(raw))] ^= 1 << rnd.randrange(8)
+            stream += junk + bytes(bad)
+    r = RtcmStreamReader()
+    out = []
+    pos = 0
+    while pos < len(stream):
+        step = rnd.randrange(1, 700)
+        out += r.feed(stream[pos : pos + step])
+        pos += step
+    out += r.close()
+    assert [f.raw for f in out] == intact
+    s = r.stats
+    assert s.frames_ok == len(intact)
+    assert s.bytes_skipped + s.truncated_bytes + sum(len(f.raw) for f in out) == len(stream)
+    if damaged:
+        assert s.crc_failures + s.truncated_bytes > 0
