@@ -231,3 +231,45 @@ def test_trains_follow_the_track_and_lose_lock_in_the_tunnel():
     assert np.all(lli[after][obs[after]] & 1)  # every signal re-acquired with loss of lock
     assert np.mean(amb[after][both] != amb[before][both]) > 0.9  # new integer ambiguities
     assert np.all(_cat(bl, "lock_time_s")[after, i][obs[after]] == 0.0)
+
+
+def test_faults_clock_step_and_station_outage():
+    from stations.scenario import Fault
+    sc = _scenario(duration=40, **OFF)
+    sat = "G05"
+    sc = sc.model_copy(update=dict(faults=[
+        Fault(kind="satellite_clock_step", at_s=20, satellite=sat, step_ns=30.0),
+        Fault(kind="station_outage", at_s=10, until_s=15, station="B")]))
+    w, bl = _run(sc)
+    j = w.sats.index(sat)
+    err = _cat(bl, "sat_clock_error_s")[:, 0, j]
+    # the step happens at 20 s satellite time; the signal sent just before arrives at epoch 20, so
+    # receivers see it from epoch 21 (transit ~0.07 s)
+    assert np.all(err[:21] == 0) and np.allclose(err[21:], 30e-9)
+    # the step is in the observations: the code jumps by 30 ns of light (~9 m)
+    P = _cat(bl, "pseudorange_m")
+    if not np.isnan(P[19, 0, j, 0]):
+        jump = (P[21, 0, j, 0] - P[20, 0, j, 0]) - (P[20, 0, j, 0] - P[19, 0, j, 0])
+        assert jump == pytest.approx(-C * 30e-9, abs=0.05)
+    obs = _cat(bl, "observed")
+    ib = w.receiver_ids.index("B")
+    assert not obs[10:15, ib].any() and obs[9, ib].any() and obs[15, ib].any()
+    lli = _cat(bl, "lli")
+    assert np.all(lli[15, ib][obs[15, ib]] & 1)  # lock lost across the outage
+
+
+def test_triple_frequency_observables():
+    sc = load_scenario("baseline-10km")
+    sc = sc.model_copy(update=dict(duration_s=30, signals={"G": ["1C", "2W", "5Q"], "E": ["1C", "5Q", "7Q"],
+                                                           "C": ["2I", "6I", "7I"]},
+                                   errors=sc.errors.model_copy(update=dict(
+                                       ionosphere=sc.errors.ionosphere.model_copy(update={"level": "off"}),
+                                       noise=sc.errors.noise.model_copy(update={"multipath": False})))))
+    w, bl = _run(sc)
+    assert w.K == 3
+    obs = _cat(bl, "observed")
+    assert obs[..., 2].sum() > 100
+    L = _cat(bl, "phase_cyc") * w.wavelength_m[None, None]
+    gf15 = L[..., 0] - L[..., 2]
+    gf15 = gf15[:, ~np.isnan(gf15).all(axis=0)]
+    assert np.nanstd(gf15 - np.nanmean(gf15, axis=0)) < 0.006
