@@ -250,7 +250,7 @@ def test_faults_clock_step_and_station_outage():
     P = _cat(bl, "pseudorange_m")
     if not np.isnan(P[19, 0, j, 0]):
         jump = (P[21, 0, j, 0] - P[20, 0, j, 0]) - (P[20, 0, j, 0] - P[19, 0, j, 0])
-        assert jump == pytest.approx(-C * 30e-9, abs=0.05)
+        assert jump == pytest.approx(-C * 30e-9, abs=0.15)  # less the range acceleration
     obs = _cat(bl, "observed")
     ib = w.receiver_ids.index("B")
     assert not obs[10:15, ib].any() and obs[9, ib].any() and obs[15, ib].any()
