@@ -99,3 +99,17 @@ def test_ionosphere_explicit_numbers_override_preset():
     assert r["vtec_tecu"] == 80.0
     assert r["gradient_tecu_per_1000km"] > resolve_ionosphere(
         parse_scenario(_demo_dict()).errors.ionosphere)["gradient_tecu_per_1000km"]
+
+
+def test_readme_example_is_valid():
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[2] / "stations" / "README.md").read_text()
+    block = text.split("```yaml\n", 1)[1].split("```", 1)[0]
+    sc = parse_scenario(yaml.safe_load(block), "README.md")
+    assert sc.trains[0].speed_profile[0].speed_kmh == 120
+    assert sc.faults[0].satellite == "G05"
+    from stations.world import World
+    w = World(sc.model_copy(update=dict(duration_s=3.0)))
+    blk = w.run()[0]
+    assert blk.observed.any()
