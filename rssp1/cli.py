@@ -68,6 +68,48 @@ def demo(
     )
 
 
+def _simulator(kind: str, config: Path, listen: str, peer: str, duration: Optional[float]) -> None:
+    import asyncio
+
+    from rssp1.simulators import build_atp, build_rbc, load_link_file, parse_host_port, serve
+
+    try:
+        settings = load_link_file(config)
+        node = build_rbc(settings) if kind == "rbc" else build_atp(settings)
+        local, remote = parse_host_port(listen), parse_host_port(peer)
+    except (ValueError, KeyError, TypeError) as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2) from exc
+    typer.echo(f"{kind} simulator on {local[0]}:{local[1]}, peer {remote[0]}:{remote[1]}")
+    try:
+        link = asyncio.run(serve(node, node.endpoint.timing.cycle_s, local, remote, duration_s=duration, echo=typer.echo))
+    except KeyboardInterrupt:
+        return
+    typer.echo(f"link {dict(link.stats)}; protocol {dict(node.endpoint.stats)}; application {dict(node.stats)}")
+
+
+@app.command("rbc-sim")
+def rbc_sim(
+    config: Path = typer.Argument(..., exists=True, dir_okay=False, help="JSON link file (see rssp1/simulators.py)"),
+    listen: str = typer.Option("0.0.0.0:50000", help="HOST:PORT to listen on"),
+    peer: str = typer.Option(..., help="HOST:PORT of the control centre's link"),
+    duration: Optional[float] = typer.Option(None, help="stop after this many seconds (default: run until ^C)"),
+) -> None:
+    """Run the RBC simulator on UDP; print each alarm as it is raised."""
+    _simulator("rbc", config, listen, peer, duration)
+
+
+@app.command("atp-sim")
+def atp_sim(
+    config: Path = typer.Argument(..., exists=True, dir_okay=False, help="JSON link file with a balise map"),
+    listen: str = typer.Option("0.0.0.0:50001", help="HOST:PORT to listen on"),
+    peer: str = typer.Option(..., help="HOST:PORT of the onboard unit's link"),
+    duration: Optional[float] = typer.Option(None, help="stop after this many seconds (default: run until ^C)"),
+) -> None:
+    """Run the ATP simulator on UDP; print each alarm as it is raised."""
+    _simulator("atp", config, listen, peer, duration)
+
+
 @app.command()
 def version() -> None:
     """Print the protocol constants this build uses."""
