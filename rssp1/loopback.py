@@ -31,9 +31,8 @@ WAIT_LIMIT_S = 10.0  # give up waiting for link-up or alarm after this (a test t
 class StandInCentre:
     """Drives a CentreRbcLink like the network engine would: fresh corrections every cycle."""
 
-    def __init__(self, link: CentreRbcLink, clock) -> None:
+    def __init__(self, link: CentreRbcLink) -> None:
         self.link = link
-        self.clock = clock
         self.producing = True
         self.epoch_ms = 1_400_000_000_000
         for s in DEMO_SECTIONS:
@@ -82,7 +81,7 @@ async def time_to_alarm(
         keys = Keyring({1: bytes(range(32))})
         centre_ep, rbc_ep = SealedEndpoint(centre_ep, keys), SealedEndpoint(rbc_ep, keys)
     max_age_s = 4 * timing.cycle_s
-    centre = StandInCentre(CentreRbcLink(centre_ep, max_correction_age_s=max_age_s), clock)
+    centre = StandInCentre(CentreRbcLink(centre_ep, max_correction_age_s=max_age_s))
     rbc = RbcSimulator(rbc_ep, max_correction_age_s=max_age_s)
     start = clock()
     if transport == "udp":

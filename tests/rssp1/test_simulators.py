@@ -51,7 +51,7 @@ def test_rbc_service_reports_a_section_alarm(sealed):
             from rssp1.envelope import Keyring, SealedEndpoint
 
             centre_ep = SealedEndpoint(centre_ep, Keyring.from_mapping({"3": key}))
-        centre = StandInCentre(CentreRbcLink(centre_ep), clock=None)
+        centre = StandInCentre(CentreRbcLink(centre_ep))
         centre_link = await UdpLink.open(centre, CYCLE_S, ("127.0.0.1", 0), ("127.0.0.1", rbc_port))
         service = asyncio.create_task(
             serve(rbc, CYCLE_S, ("127.0.0.1", rbc_port), centre_link.local_address, duration_s=2.0, echo=lines.append)
