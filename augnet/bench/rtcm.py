@@ -24,8 +24,8 @@ import numpy as np
 
 NSAT, NSIG = 12, 2
 BATCH_RECEIVERS = 1000
-REPEATS = 5
-SECONDS_PER_REPEAT = 0.4  # ~2 s per case, ~20 s for the whole run
+REPEATS = 7
+SECONDS_PER_REPEAT = 0.35  # ~2.5 s per case, ~25 s for the whole run
 
 
 def sample_inputs(nrx: int = BATCH_RECEIVERS, seed: int = 2026):
