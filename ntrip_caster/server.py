@@ -262,6 +262,9 @@ class CasterProtocol(asyncio.Protocol):
         if self.pending is not None:
             self.pending.extend(events)
             return
+        self._handle_safely(events)
+
+    def _handle_safely(self, events: list) -> None:
         try:
             self.handle_events(events)
         except Exception:  # a bug must cost one connection, never the caster
@@ -311,7 +314,7 @@ class CasterProtocol(asyncio.Protocol):
         if self.closed:
             return
         self.transport.resume_reading()
-        self.handle_events(pending)
+        self._handle_safely(pending)
 
     def _head_timeout(self) -> None:
         self.head_timer = None
@@ -451,7 +454,9 @@ class Caster:
         """Call `then(user or None)`; synchronously when the answer is cheap, else after scrypt
         ran in a worker thread (returns that future)."""
         if PUBLIC in groups:
-            then(req.user if req.user in self.auth.users else None)
+            # No check needed to read; name the user only if these credentials were verified
+            # before (an unverified name must not appear in the statistics).
+            then(self.auth.cached_user(req.user, req.password))
             return None
         if source_password:
             fut = self.loop.run_in_executor(None, self.auth.check_source_password,

@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
@@ -159,3 +160,10 @@ def test_serve_subprocess_stats_file_and_sigterm(tmp_path):
     finally:
         if proc.poll() is None:
             proc.kill()
+
+
+def test_example_config_is_valid():
+    example = Path(__file__).resolve().parents[2] / "ntrip_caster" / "example-caster.toml"
+    cfg = load_config(example)
+    assert [m.name for m in cfg.mounts] == ["BASE01", "NEAREST"]
+    assert verify_password("change-me", cfg.users["train0001"].password_hash)
