@@ -1,34 +1,59 @@
-"""`augnet bench NAME`: one module per benchmark in this package, each with a `main()` that prints."""
+"""`augnet bench NAME [ARGS]`: one module per benchmark in this package, each with a `main(argv)` that
+measures ours and the named peer side by side in one run and prints figures and ratios."""
 
 from __future__ import annotations
 
 import importlib
+import inspect
 
 import typer
 
-app = typer.Typer(no_args_is_help=True)
-
 BENCHMARKS = {
-    "rtcm": "augnet.bench.rtcm",
+    "rtcm": ("augnet.bench.rtcm", "RTCM 3 codec: decode/encode against pyrtcm, batch MSM7 encoder."),
+    "sim": ("augnet.bench.sim", "Simulated world: epochs per second for `demo` against the 50x real-time goal."),
+    "rssp1": ("augnet.bench.rssp1", "RSSP-I: frames encoded + verified per second."),
+    "caster": ("augnet.bench.caster", "NTRIP caster under load (see also `augnet loadtest`)."),
+    "rtk": ("augnet.bench.rtk", "Onboard RTK: time per epoch against RTKLIB rnx2rtkp."),
+    "centre": ("augnet.bench.centre", "Network solution per epoch and VRS synthesis + encoding for many trains."),
 }
+# `augnet bench all` (and `make run` until `augnet up` lands) runs these: the ones that finish in a minute.
+QUICK = ("rtcm", "rssp1", "sim")
+
+app = typer.Typer(no_args_is_help=True, help="Benchmarks against named peers.")
 
 
-def _run(name: str) -> None:
-    importlib.import_module(BENCHMARKS[name]).main()
+def _run(name: str, argv: list[str] | None = None) -> None:
+    module = importlib.import_module(BENCHMARKS[name][0])
+    if inspect.signature(module.main).parameters:
+        module.main(argv or [])
+    else:
+        module.main()
 
 
 def run_all() -> None:
-    for name in BENCHMARKS:
+    for name in QUICK:
+        try:
+            importlib.import_module(BENCHMARKS[name][0])
+        except ModuleNotFoundError:
+            continue
+        print(f"== augnet bench {name} ==", flush=True)
         _run(name)
 
 
-@app.command()
-def all() -> None:  # noqa: A001 - the command is called `all`
-    """Run every benchmark."""
+@app.command("all")
+def all_() -> None:
+    """Run the quick benchmarks one after another."""
     run_all()
 
 
-@app.command()
-def rtcm() -> None:
-    """RTCM 3 codec: our decoder/encoder against pyrtcm, and the batch MSM7 encoder."""
-    _run("rtcm")
+def _make_command(name: str, help_text: str):
+    def command(ctx: typer.Context) -> None:
+        _run(name, list(ctx.args))
+
+    command.__doc__ = help_text
+    return command
+
+
+for _name, (_module, _help) in BENCHMARKS.items():
+    app.command(_name, help=_help, context_settings={"allow_extra_args": True,
+                                                        "ignore_unknown_options": True})(_make_command(_name, _help))
