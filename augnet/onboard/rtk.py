@@ -84,6 +84,8 @@ HOLD_AFTER_FIXES = 5
 HOLD_VARIANCE_CYC2 = 0.001
 # A time step longer than this [s] restarts the position/velocity part of the filter.
 MAX_PREDICTION_GAP_S = 30.0
+# Redo the measurement update linearised at the updated position when it moved more than this [m].
+RELINEARISE_M = 0.05
 # Fixed solutions failing the residual check are retried this many times, each without the worst
 # satellite (RTKLIB-EX and commercial engines exclude satellites the same way).
 AR_EXCLUSION_RETRIES = 3
@@ -443,7 +445,23 @@ class RtkFilter:
                 v, H, R, kind, keys = self._build_rows(groups, ro.sats, sd_phase, sd_code, los_r, wl, var_sd)
             keep = ~((kind == 0) & (np.abs(v) > MAX_CODE_INNOVATION_M))
             v, H, R = v[keep], H[keep], R[np.ix_(keep, keep)]
+            x_prior, P_prior = self.x.copy(), self.P.copy()
             self._kalman_update(v, H, R)
+            # Iterated EKF step: when the update moved the position by more than RELINEARISE_M (a
+            # start from SPP), the troposphere and geometry at the rover are recomputed at the new
+            # point and the update redone from the same prior.  A few metres of height error in the
+            # linearisation point would otherwise bias the height by millimetres (tropospheric delay
+            # changes ~0.3 mm per metre of height).
+            if np.linalg.norm(self.x[:3] - x_rov) > RELINEARISE_M:
+                x_rov = self.x[:3].copy()
+                self.x, self.P = x_prior, P_prior
+                phase_r, code_r, los_r, el_r = self._zero_diff(ro, x_rov, sp_r)
+                sd_phase = phase_r[:, :nf] - phase_b[:, :nf]
+                sd_code = code_r[:, :nf] - code_b[:, :nf]
+                v2, H2, R2, _, _ = self._build_rows(groups, ro.sats, sd_phase, sd_code, los_r, wl, var_sd)
+                v2, H2, R2 = v2[keep], H2[keep], R2[np.ix_(keep, keep)]
+                v2 = v2 - H2[:, :3] @ (x_prior[:3] - x_rov)
+                self._kalman_update(v2, H2, R2)
         # ambiguities seen this epoch are fresh
         for g in groups:
             for k in g.sats:
@@ -525,7 +543,7 @@ class RtkFilter:
                     if kind == 1:
                         i = self.amb_index[key]
                         y = sd_phase[k, f] - sd_phase[ref, f]
-                        pred = h[:3] @ np.zeros(3) + wl[k, f] * self.x[i] - wl[ref, f] * self.x[iref]
+                        pred = wl[k, f] * self.x[i] - wl[ref, f] * self.x[iref]
                         h[i] = wl[k, f]
                         h[iref] = -wl[ref, f]
                         keys.append(key)
