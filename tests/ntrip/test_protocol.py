@@ -5,6 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from pyrtcm import RTCMReader
 
 from ntrip_caster.chunked import ChunkedDecoder, encode_chunk
@@ -15,7 +17,8 @@ from ntrip_caster.gga import NmeaLineSplitter, format_gga, great_circle_m, parse
 from ntrip_caster.limits import MAX_NMEA_LINE_BYTES, MAX_REQUEST_HEAD_BYTES
 from ntrip_caster.reposition import RepositionPolicy, choose_base
 from ntrip_caster.response import error_response, sourcetable_response, stream_ok
-from ntrip_caster.rtcm_frames import RtcmFrameAligner, crc24q, frame_rtcm3, split_rtcm3_frames
+from ntrip_caster.rtcm_frames import (RtcmFrameAligner, crc24q, crc24q_bytewise, frame_rtcm3,
+                                      split_rtcm3_frames)
 from ntrip_caster.sourcetable import StrRecord, parse_sourcetable, render_sourcetable
 
 from .helpers import basic
@@ -233,3 +236,10 @@ def test_v2_post_without_chunked_body_is_raw():
     events = conn.receive_data(b"POST /M HTTP/1.1\r\nNtrip-Version: Ntrip/2.0\r\n\r\n\xd3\x00\x00")
     assert not events[0].request.chunked and events[1] == SourceData(b"\xd3\x00\x00")
     assert conn.receive_data(b"more") == [SourceData(b"more")]
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.binary(min_size=0, max_size=1100))
+def test_vectorised_crc24q_equals_the_byte_loop(data):
+    assert crc24q(data) == crc24q_bytewise(data)
+    assert crc24q(bytearray(data)) == crc24q(memoryview(data))
