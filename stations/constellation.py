@@ -157,8 +157,11 @@ def nominal_orbits(systems, t_ref_gpst: float, seed: int) -> list[NominalOrbit]:
     return sorted(out, key=lambda o: ("GEC".index(o.sat[0]), o.prn))
 
 
-def broadcast_set(orbit: NominalOrbit, toe_gpst: float, iode: int) -> Ephemeris:
-    """The broadcast ephemeris with toe = toc = toe_gpst of a nominal orbit (exact, no fit error)."""
+def broadcast_set(orbit: NominalOrbit, toe_gpst: float, iode: int, quantised: bool = True) -> Ephemeris:
+    """The broadcast ephemeris with toe = toc = toe_gpst of a nominal orbit (no fit error).
+
+    `quantised=False` keeps full precision: the truth orbit, continuous from set to set.
+    """
     system = orbit.system
     gm, omge = _gm_omge(system)
     dt = toe_gpst - orbit.t_ref_gpst
@@ -189,7 +192,8 @@ def broadcast_set(orbit: NominalOrbit, toe_gpst: float, iode: int) -> Ephemeris:
         common.update(data_sources=GAL_INAV_DATA_SOURCES)
     # On the broadcast resolution, like a real upload: what nav.rnx holds is exactly what a receiver
     # decodes from RTCM 1019/1042/1046.  Consecutive sets then differ by the quantisation (cm, 0.1 ns).
-    return quantise(Ephemeris(**common))
+    eph = Ephemeris(**common)
+    return quantise(eph) if quantised else eph
 
 
 def issue_of_data(system: str, toe_gpst: float) -> int:
@@ -213,15 +217,19 @@ def toe_for(system: str, t_gpst) -> np.ndarray:
     return gtime.system_to_gpst(system, np.floor(t_sys / step) * step)
 
 
-def broadcast_ephemerides(orbits: list[NominalOrbit], t0_gpst: float, t1_gpst: float) -> list[Ephemeris]:
-    """Every broadcast set a receiver sees between t0 and t1 (GPST seconds), in time order."""
+def broadcast_ephemerides(orbits: list[NominalOrbit], t0_gpst: float, t1_gpst: float,
+                          quantised: bool = True) -> list[Ephemeris]:
+    """Every broadcast set a receiver sees between t0 and t1 (GPST seconds), in time order.
+
+    `quantised=False`: the same sets at full precision, i.e. the truth orbits and clocks.
+    """
     out = []
     for orb in orbits:
         step = TOE_INTERVAL_S[orb.system]
         # from one set before t0: Galileo sets are used only after their toe (age of data > 0)
         toe = float(toe_for(orb.system, t0_gpst)) - step
         while toe <= t1_gpst:
-            out.append(broadcast_set(orb, toe, issue_of_data(orb.system, toe)))
+            out.append(broadcast_set(orb, toe, issue_of_data(orb.system, toe), quantised))
             toe += step
     out.sort(key=lambda e: (e.toe_gpst, "GEC".index(e.system), e.prn))
     return out

@@ -58,6 +58,7 @@ GRADES = {
 WHITE_SHARE_CODE = 0.5  # fraction of code error variance that is white (rest is multipath)
 WHITE_SHARE_PHASE = 0.7
 DOPPLER_NOISE_HZ = 0.02
+ATMO_RATE_STEP_S = 0.5  # half-step of the central difference giving the atmosphere's rate
 
 
 @dataclass
@@ -95,8 +96,8 @@ class EpochBlock:
     azimuth_rad: np.ndarray
     range_m: np.ndarray  # geometric range incl. Sagnac (E, R, N)
     sat_clock_s: np.ndarray  # truth satellite clock (E, R, N)
-    sat_clock_error_s: np.ndarray  # truth minus broadcast
-    orbit_error_range_m: np.ndarray  # truth minus broadcast orbit, projected on the line of sight
+    sat_clock_error_s: np.ndarray  # truth minus broadcast (drawn error + broadcast rounding)
+    orbit_error_range_m: np.ndarray  # truth minus broadcast orbit, along the line of sight
     stec_tecu: np.ndarray  # slant TEC (E, R, N)
     tropo_m: np.ndarray  # slant troposphere delay (E, R, N)
     ambiguity_cyc: np.ndarray  # integer ambiguity (E, R, N, K), NaN when not tracked
@@ -124,12 +125,17 @@ class World:
         if nav_ephemerides is None:
             self.orbits = const.nominal_orbits(sc.constellations, self.t0, sc.seed)
             self.ephemerides = const.broadcast_ephemerides(self.orbits, self.t0, t_end)
+            # truth: the same orbits at full precision, continuous across set changes (a satellite
+            # does not jump when a new set is uploaded; only its broadcast description does)
+            truth_sets = const.broadcast_ephemerides(self.orbits, self.t0, t_end, quantised=False)
             self.nominal = True
         else:
             self.orbits = []
             self.ephemerides = [e for e in nav_ephemerides if e.system in sc.constellations]
+            truth_sets = self.ephemerides  # a real file: truth follows its sets (jumps at changes)
             self.nominal = False
         self.nav = NavigationData(self.ephemerides)
+        self.truth_nav = NavigationData(truth_sets)
         sats = [s for s in self.nav.satellites if s[0] in sc.constellations]
         self.sats = sats
         n = len(sats)
@@ -289,10 +295,11 @@ class World:
         dtr, dtr_dot = self._clock_block(E)
         t_rx = t_tag[:, None] - dtr  # true reception time (E, R)
 
-        # satellites: ephemeris rows selected at the epoch, truth = broadcast + error
-        idx = self.nav.select(self.sats, t_tag)  # (E, N)
-        valid = np.broadcast_to((idx >= 0)[:, None, :], (E, R, N))
-        rows = self.nav.table.take(np.broadcast_to(np.maximum(idx, 0)[:, None, :], (E, R, N)))
+        # satellites: truth = full-precision orbit and clock + error (the broadcast sets are these
+        # rounded to the ICD resolution); valid where a broadcast set exists
+        idx = self.truth_nav.select(self.sats, t_tag)  # (E, N)
+        valid = np.broadcast_to(((idx >= 0) & (self.nav.select(self.sats, t_tag) >= 0))[:, None, :], (E, R, N))
+        rows = self.truth_nav.table.take(np.broadcast_to(np.maximum(idx, 0)[:, None, :], (E, R, N)))
         sat_idx = np.broadcast_to(np.arange(N), (E, R, N))
         tau = np.full((E, R, N), NOMINAL_TRANSIT_S)
         t_rx3 = np.broadcast_to(t_rx[:, :, None], (E, R, N))
@@ -310,12 +317,23 @@ class World:
             rng = np.linalg.norm(los, axis=-1)
             tau = rng / c
         u = los / rng[..., None]
-        vel = st.velocity_m_s
+        # Range rate in the receive-time frame: the satellite velocity turned like its position,
+        # and the transmit time moving with the range, d(t - tau)/dt = 1 - d(tau)/dt.
+        v = st.velocity_m_s
+        v_rot = np.stack([v[..., 0] * ca + v[..., 1] * sa, -v[..., 0] * sa + v[..., 1] * ca, v[..., 2]], axis=-1)
+        d_rot = np.stack([rot[..., 1], -rot[..., 0], np.zeros_like(rng)], axis=-1)  # d(rot)/d(angle)
+        tau_dot = np.einsum("erni,erni->ern", u, v_rot - rx_vel[:, :, None, :]) / c
+        vel = v_rot * (1.0 - tau_dot)[..., None] + (self.omge * tau_dot)[..., None] * d_rot
         range_rate = np.einsum("erni,erni->ern", u, vel - rx_vel[:, :, None, :])
-        dclk_err = self.orbit_errors.clock_s(sat_idx, err_t)
-        dts = st.clock_bias_s + dclk_err
+        dts = st.clock_bias_s + self.orbit_errors.clock_s(sat_idx, err_t)
         dts_dot = st.clock_drift_s_s
-        orbit_err_range = np.einsum("erni,erni->ern", u, d_orbit)
+        # truth minus broadcast, as a user of the broadcast sets meets it: the drawn error plus the
+        # rounding of the broadcast parameters (cm, a fraction of a ns)
+        b_idx = self.nav.select(self.sats, t_tag)
+        b_rows = self.nav.table.take(np.broadcast_to(np.maximum(b_idx, 0)[:, None, :], (E, R, N)))
+        st_b = satellite_state(b_rows, t_rx3, -tau)
+        dclk_err = dts - st_b.clock_bias_s
+        orbit_err_range = np.einsum("erni,erni->ern", u, pos - st_b.position_m)
 
         # receiver geodetic, ENU, azimuth/elevation
         llh = ecef_to_geodetic(rx)  # (E, R, 3)
@@ -325,18 +343,35 @@ class World:
         az = np.mod(np.arctan2(enu[..., 0], enu[..., 1]), 2 * np.pi)
         el_safe = np.maximum(el, np.radians(1.0))
 
-        # atmosphere
+        # atmosphere, and its rate (the Doppler is the whole phase rate, atmosphere included):
+        # evaluated again +-ATMO_RATE_STEP_S along the satellite's apparent motion in the sky
         lat = np.broadcast_to(llh[..., 0][..., None], (E, R, N))
         lon = np.broadcast_to(llh[..., 1][..., None], (E, R, N))
-        stec = self.iono.slant_tec_tecu(lat, lon, az, el_safe, t_rx3)
-        iono = delay_m(stec[..., None], self.freq_hz[None, None])  # (E, R, N, K)
-        if self.tropo_enabled:
+        v_rel = vel - rx_vel[:, :, None, :]
+        u_dot = (v_rel - u * np.einsum("erni,erni->ern", u, v_rel)[..., None]) / rng[..., None]
+        enu_dot = np.einsum("erij,ernj->erni", rot_enu, u_dot)
+        el_dot = enu_dot[..., 2] / np.maximum(np.cos(el), 1e-6)
+        horiz = np.maximum(np.hypot(enu[..., 0], enu[..., 1]), 1e-9)
+        az_dot = (enu[..., 1] * enu_dot[..., 0] - enu[..., 0] * enu_dot[..., 1]) / horiz**2
+
+        def atmosphere(el_a, az_a, dt_s):
+            el_a = np.maximum(el_a, np.radians(1.0))
+            stec_a = self.iono.slant_tec_tecu(lat, lon, az_a, el_a, t_rx3 + dt_s)
+            if not self.tropo_enabled:
+                return stec_a, np.zeros((E, R, N))
             zhd, zwd = zenith_delays_m(llh[..., 0], llh[..., 2])
-            zwd = zwd + self.wet.zwd_residual_m(llh[..., 0], llh[..., 1], llh[..., 2], t_rx)
-            mh, mw = niell(el_safe, lat, llh[..., 2][..., None], self.doy)
-            tropo = zhd[..., None] * mh + zwd[..., None] * mw
-        else:
-            tropo = np.zeros((E, R, N))
+            zwd = zwd + self.wet.zwd_residual_m(llh[..., 0], llh[..., 1], llh[..., 2], t_rx + dt_s)
+            mh, mw = niell(el_a, lat, llh[..., 2][..., None], self.doy)
+            return stec_a, zhd[..., None] * mh + zwd[..., None] * mw
+
+        stec, tropo = atmosphere(el, az, 0.0)
+        h = ATMO_RATE_STEP_S
+        stec_p, tropo_p = atmosphere(el + el_dot * h, az + az_dot * h, h)
+        stec_m, tropo_m = atmosphere(el - el_dot * h, az - az_dot * h, -h)
+        stec_rate = (stec_p - stec_m) / (2 * h)
+        tropo_rate = (tropo_p - tropo_m) / (2 * h)
+        iono = delay_m(stec[..., None], self.freq_hz[None, None])  # (E, R, N, K)
+        iono_rate = delay_m(stec_rate[..., None], self.freq_hz[None, None])
 
         # elevation-dependent noise scale (RTKLIB-style a^2 + b^2/sin^2(el), a = b)
         el_scale = np.sqrt(0.5 + 0.5 / np.sin(el_safe) ** 2)  # (E, R, N)
@@ -406,8 +441,9 @@ class World:
             ie = iono[e]
             P[e] = np.where(obs, ge + ie + mp_c + n_c, np.nan)
             L[e] = np.where(obs, (ge - ie + mp_p + n_p) / lam[0] + self._amb + self._half, np.nan)
-            D[e] = np.where(obs, -(range_rate[e] + c * (dtr_dot[e][:, None] - dts_dot[e]))[..., None]
-                            / lam[0] + DOPPLER_NOISE_HZ * (sc_phase > 0) * z[3], np.nan)
+            phase_rate = (range_rate[e] + c * (dtr_dot[e][:, None] - dts_dot[e]) + tropo_rate[e])[..., None] \
+                - iono_rate[e]
+            D[e] = np.where(obs, -phase_rate / lam[0] + DOPPLER_NOISE_HZ * (sc_phase > 0) * z[3], np.nan)
             S[e] = np.where(obs, cnr[e], np.nan)
             lli[e] = np.where(obs, (reset * 1 | (self._half != 0) * 2), 0).astype(np.int8)
             lock[e] = np.where(obs, self._lock_s, np.nan)
