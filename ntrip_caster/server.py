@@ -205,6 +205,9 @@ class Mountpoint:
                 "connected_since": src.connected_since, "bytes_in": src.bytes_in},
             "source_sessions": self.source_sessions,
             "fanout_last_ms": round(self.fanout_last_ms, 3), "fanout_max_ms": round(self.fanout_max_ms, 3),
+            # GGA-driven mountpoints: connected, kept, but nothing to send until a position arrives
+            "waiting_for_position": 0 if self.kind == "source" else sum(
+                1 for c in self.caster.clients.values() if c.mount is self and c.last_fix is None),
         }
 
 
@@ -546,6 +549,8 @@ class Caster:
             s.base = mount
         elif req.gga is not None:
             self._apply_fix(s, req.gga)
+        else:
+            log.debug("client %d on %s kept connected, waiting for its first GGA", s.id, mount.name)
 
     def _source_request(self, proto: CasterProtocol, req: NtripRequest) -> asyncio.Future | None:
         mount = self.mounts.get(req.mount) if req.valid_mount else None

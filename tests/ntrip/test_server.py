@@ -220,9 +220,11 @@ def test_nearest_base_follows_gga_with_hysteresis():
         c, head = open_client(ct.port, "NEAR", gga=None)
         assert head == b"ICY 200 OK\r\n"
         wait_for(lambda: ct.snapshot()["clients"] and ct.snapshot()["clients"][0]["waiting_for_position"])
+        assert ct.snapshot(clients=False)["mounts"]["NEAR"]["waiting_for_position"] == 1
         s1.sendall(frame_rtcm3(b"\x3e\xd0" + b"one"))  # nobody subscribed yet: not delivered
         c.sendall(b"junk that is not NMEA\r\n" + format_gga(31.0, 121.45))
         wait_for(lambda: ct.snapshot()["clients"][0]["base"] == "BASE02")
+        assert ct.snapshot(clients=False)["mounts"]["NEAR"]["waiting_for_position"] == 0
         f2 = frame_rtcm3(b"\x3e\xd0" + b"two")
         s2.sendall(f2)
         assert read_exactly(c, len(f2)) == f2
