@@ -60,8 +60,11 @@ def epoch_frame(seq: int, sent_ns: int, size: int) -> bytes:
     """The RTCM 3 frame for one epoch; `size` is the payload size (bytes)."""
     size = max(LOADTEST_MIN_PAYLOAD, min(size, RTCM3_MAX_PAYLOAD_BYTES))
     head = _HEAD.pack(LOADTEST_MESSAGE_TYPE << 4, seq, sent_ns)
-    fill = bytes((seq + i) & 0xFF for i in range(size - len(head)))
-    return frame_rtcm3(head + fill)
+    start = seq & 0xFF  # fill byte i is (seq + i) mod 256, sliced from a precomputed pattern
+    return frame_rtcm3(head + _FILL_PATTERN[start:start + size - len(head)])
+
+
+_FILL_PATTERN = bytes(range(256)) * 6  # 1,536 bytes: any 256-aligned start leaves >= 1,023
 
 
 def epoch_payload(size: int) -> int:
