@@ -63,11 +63,9 @@ def _read_pos(path):
     return np.array(t), np.array(xyz), np.array(q)
 
 
-@pytest.mark.rtklib
-def test_rnx2rtkp_fixes_baseline_10km(tmp_path):
+def _judge_baseline(tmp_path, sc, nav_ephemerides=None, label="baseline-10km"):
     rnx2rtkp = require_tool("rnx2rtkp")
-    sc = load_scenario("baseline-10km").model_copy(update=dict(duration_s=DURATION_S))
-    record(sc, tmp_path, rtcm=False)
+    record(sc, tmp_path, nav_ephemerides=nav_ephemerides, rtcm=False)
     base = _truth(tmp_path / "truth.csv", "A")
     rover = _truth(tmp_path / "truth.csv", "B")
     assert 9.9e3 < np.linalg.norm(rover - base) < 10.1e3
@@ -78,7 +76,7 @@ def test_rnx2rtkp_fixes_baseline_10km(tmp_path):
                     str(tmp_path / "A.obs"), str(tmp_path / "nav.rnx")],
                    check=True, capture_output=True, timeout=120)
     t, xyz, q = _read_pos(out)
-    assert len(t) == DURATION_S
+    assert len(t) == sc.n_epochs
     after = (t - t[0]) >= 60.0
     fixed = (q == 1) & after
     fix_rate = fixed.sum() / after.sum()
@@ -86,10 +84,27 @@ def test_rnx2rtkp_fixes_baseline_10km(tmp_path):
     horiz = np.hypot(enu[:, 0], enu[:, 1])[fixed]
     vert = np.abs(enu[:, 2])[fixed]
     within = np.mean((horiz < 0.01) & (vert < 0.02))
-    print(f"baseline-10km: fixed {fix_rate:.1%} after 60 s; within 1 cm H / 2 cm V: {within:.1%}; "
+    print(f"{label}: fixed {fix_rate:.1%} after 60 s; within 1 cm H / 2 cm V: {within:.1%}; "
           f"H rms {np.sqrt(np.mean(horiz ** 2)) * 1e3:.1f} mm, V rms {np.sqrt(np.mean(vert ** 2)) * 1e3:.1f} mm")
     assert fix_rate >= 0.95
     assert within >= 0.95
+
+
+@pytest.mark.rtklib
+def test_rnx2rtkp_fixes_baseline_10km(tmp_path):
+    sc = load_scenario("baseline-10km").model_copy(update=dict(duration_s=DURATION_S))
+    _judge_baseline(tmp_path, sc)
+
+
+@pytest.mark.rtklib
+@pytest.mark.shared_data
+def test_rnx2rtkp_fixes_baseline_10km_on_a_real_broadcast_file(shared_data, tmp_path):
+    """The same with the real 2023-07-11 GPS/Galileo/BeiDou broadcast ephemerides (`--nav`)."""
+    from stations.cli import nav_ephemerides_for
+
+    sc = load_scenario("baseline-10km").model_copy(update=dict(duration_s=DURATION_S))
+    sc, ephs = nav_ephemerides_for(sc, shared_data / "nav" / "brdm-2023-07-11.nav")
+    _judge_baseline(tmp_path, sc, ephs, "baseline-10km, real nav")
 
 
 @pytest.mark.rtklib
