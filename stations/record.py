@@ -82,6 +82,9 @@ class Recorder:
         sc = world.scenario
         self.obs = [empty_obs(_obs_header(world, i), world.t_tags, world.sats)
                     for i in range(len(world.receivers))]
+        # truth and atmosphere go to disk block by block (an hour of demo is ~1 M atmosphere rows)
+        self._truth_file = open(self.out / "truth.csv", "w", newline="\n")
+        self._atmo_file = open(self.out / "atmosphere.csv", "w", newline="\n")
         self.truth_lines = ["gpst_s,gpst_calendar,receiver,kind,x_m,y_m,z_m,clock_s,track,km,speed_m_s"]
         k_cols = ",".join(f"N{k + 1}_cyc" for k in range(world.K))
         self.atmo_lines = ["gpst_s,receiver,sat,elevation_deg,azimuth_deg,stec_tecu,iono_l1_m,tropo_m,"
@@ -114,6 +117,7 @@ class Recorder:
                     data.ssi[f"L{code}"][np.ix_(e_idx, cols)] = ssi
         self._truth(blk)
         self._atmosphere(blk)
+        self._flush()
         if self.rtcm is not None:
             self.rtcm.add(blk)
 
@@ -151,6 +155,14 @@ class Recorder:
                 f"{blk.t_gpst[e_i[j]]:.3f},{ids[r_i[j]]},{w.sats[n_i[j]]},{el[j]:.4f},{az[j]:.4f},"
                 f"{stec[j]:.5f},{iono[j]:.5f},{tropo[j]:.5f},{orb[j]:.5f},{clk[j]:.5f},{ambs}")
 
+    def _flush(self) -> None:
+        if self.truth_lines:
+            self._truth_file.write("\n".join(self.truth_lines) + "\n")
+            self.truth_lines = []
+        if self.atmo_lines:
+            self._atmo_file.write("\n".join(self.atmo_lines) + "\n")
+            self.atmo_lines = []
+
     def finish(self) -> list[str]:
         w = self.world
         files = []
@@ -164,8 +176,9 @@ class Recorder:
         for i, rx in enumerate(w.receivers):
             write_obs(self.out / f"{rx.id}.obs", self.obs[i])
             files.append(f"{rx.id}.obs")
-        (self.out / "truth.csv").write_text("\n".join(self.truth_lines) + "\n")
-        (self.out / "atmosphere.csv").write_text("\n".join(self.atmo_lines) + "\n")
+        self._flush()
+        self._truth_file.close()
+        self._atmo_file.close()
         files += ["truth.csv", "atmosphere.csv"]
         if self.rtcm is not None:
             files += self.rtcm.write(self.out)
