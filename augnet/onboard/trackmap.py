@@ -1,0 +1,294 @@
+"""Track map: a track database, map matching among parallel tracks, along/cross-track protection levels.
+
+Track database file (JSON, `"format": "augnet-trackmap/1"`; one per scenario; the simulator exports
+its track geometry to it, onboard never imports the simulator):
+
+    {
+      "format": "augnet-trackmap/1",
+      "name": "scenario name",
+      "tracks": [
+        {"id": "UP", "line": "L1", "name": "up main line", "km_start": 0.0,
+         "points": [[lat_deg, lon_deg, h_m], ...]}          # WGS 84, ellipsoidal height, in km order
+      ],
+      "km_posts": [{"track": "UP", "km": 1.0, "label": "K1"}],               # optional, informative
+      "balises": [{"id": "VB-0001", "track": "UP", "km": 1.2345,
+                   "telegram": "hex string", "linked": true}]                 # virtual balises
+    }
+
+Points are joined by straight chords in ECEF (export them densely on curves: a chord 100 m long on
+a 1 km radius curve deviates 1.25 m; 20 m deviates 5 cm).  Chainage runs along the polyline:
+km = km_start + arc length / 1000.
+
+Map matching projects the antenna position onto every track segment at once (numpy over segments),
+keeps the nearest point per track, and picks the track with the smallest cross-track offset.
+Cross-track is measured in the local horizontal plane, to the left of the direction of increasing
+km.  Protection levels: PL = K sigma with sigma the filter's standard deviation projected on the
+track's tangent (along) and horizontal normal (cross), and K the two-sided Gaussian quantile for the
+allocated integrity risk.  The track is *confirmed* only when the cross-track PL is below half the
+distance to the nearest other candidate track (so the protection region cannot reach it) and the
+offset itself is inside the gate; otherwise the match is reported as not confirmed.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from augnet.gnss.geometry import ecef_to_geodetic, enu_rotation, geodetic_deg_to_ecef
+
+FORMAT = "augnet-trackmap/1"
+# Integrity risk allocated to track identification per decision (railway.md: Helmet project,
+# integrity risk < 1e-9/h for track discrimination; per-epoch allocations of 1e-7..1e-9 are usual).
+DEFAULT_INTEGRITY_RISK = 1e-7
+# A position farther than this [m] from every track is off the map (a siding not in the database,
+# or a wrong position): no track is reported.
+DEFAULT_MATCH_GATE_M = 10.0
+# Parallel tracks are 4.5-5 m apart (railway.md); candidates are tracks within this many metres.
+CANDIDATE_RADIUS_M = 25.0
+
+
+class TrackMapError(ValueError):
+    """A track database file that cannot be used (wrong format, too few points, unknown track)."""
+
+
+def gaussian_k(integrity_risk: float) -> float:
+    """K with P(|N(0,1)| > K) = integrity_risk (two-sided), by bisection on erfc."""
+    if not 0.0 < integrity_risk < 1.0:
+        raise ValueError("integrity risk must be in (0, 1)")
+    lo, hi = 0.0, 40.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if math.erfc(mid / math.sqrt(2.0)) > integrity_risk:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+@dataclass(frozen=True)
+class Track:
+    id: str
+    line: str
+    name: str
+    km_start: float
+    points_llh: np.ndarray  # (n, 3) lat deg, lon deg, h m
+
+
+@dataclass(frozen=True)
+class VirtualBalise:
+    id: str
+    track: str
+    km: float
+    telegram: bytes
+    linked: bool = True
+
+
+@dataclass(frozen=True)
+class KmPost:
+    track: str
+    km: float
+    label: str
+
+
+@dataclass
+class MapMatch:
+    """Where the train is on the map, and how sure."""
+
+    track: str | None  # None when off the map
+    line: str | None
+    km: float  # chainage [km]
+    along_m: float  # arc length from the track's first point [m]
+    cross_m: float  # horizontal offset, positive to the left of increasing km [m]
+    vertical_m: float  # height above the track's polyline [m]
+    along_pl_m: float
+    cross_pl_m: float
+    confirmed: bool
+    nearest_other_m: float  # cross-track distance to the nearest other candidate track [m]
+    candidates: dict[str, float] = field(default_factory=dict)  # track id -> cross offset [m]
+    message: str = ""
+
+
+class TrackDatabase:
+    def __init__(self, name: str, tracks: list[Track], balises: list[VirtualBalise] | None = None,
+                 km_posts: list[KmPost] | None = None):
+        if not tracks:
+            raise TrackMapError("a track database needs at least one track")
+        ids = [t.id for t in tracks]
+        if len(set(ids)) != len(ids):
+            raise TrackMapError("duplicate track ids")
+        self.name = name
+        self.tracks = {t.id: t for t in tracks}
+        self.balises = list(balises or [])
+        self.km_posts = list(km_posts or [])
+        for b in self.balises:
+            if b.track not in self.tracks:
+                raise TrackMapError(f"balise {b.id} on unknown track {b.track}")
+        self._build_segments(tracks)
+
+    # ------------------------------------------------------------------------------------------
+    # file format
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "TrackDatabase":
+        if d.get("format") != FORMAT:
+            raise TrackMapError(f"not a track database (format {d.get('format')!r}, expected {FORMAT!r})")
+        try:
+            tracks = []
+            for t in d["tracks"]:
+                pts = np.asarray(t["points"], dtype=float)
+                if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 2 or not np.all(np.isfinite(pts)):
+                    raise TrackMapError(f"track {t.get('id')}: points must be >= 2 finite [lat, lon, h]")
+                tracks.append(Track(str(t["id"]), str(t.get("line", "")), str(t.get("name", "")),
+                                    float(t.get("km_start", 0.0)), pts))
+            balises = [VirtualBalise(str(b["id"]), str(b["track"]), float(b["km"]), bytes.fromhex(b.get("telegram", "")),
+                                     bool(b.get("linked", True))) for b in d.get("balises", [])]
+            posts = [KmPost(str(p["track"]), float(p["km"]), str(p.get("label", ""))) for p in d.get("km_posts", [])]
+        except (KeyError, TypeError, ValueError) as exc:
+            if isinstance(exc, TrackMapError):
+                raise
+            raise TrackMapError(f"malformed track database: {exc}") from None
+        return cls(str(d.get("name", "")), tracks, balises, posts)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "format": FORMAT,
+            "name": self.name,
+            "tracks": [{"id": t.id, "line": t.line, "name": t.name, "km_start": t.km_start,
+                        "points": t.points_llh.tolist()} for t in self.tracks.values()],
+            "km_posts": [{"track": p.track, "km": p.km, "label": p.label} for p in self.km_posts],
+            "balises": [{"id": b.id, "track": b.track, "km": b.km, "telegram": b.telegram.hex(), "linked": b.linked}
+                        for b in self.balises],
+        }
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "TrackDatabase":
+        try:
+            with open(path, encoding="utf-8") as f:
+                d = json.load(f)
+        except (OSError, json.JSONDecodeError) as exc:
+            raise TrackMapError(f"cannot read track database {path}: {exc}") from None
+        return cls.from_dict(d)
+
+    def save(self, path: str | os.PathLike) -> None:
+        with open(path, "w", encoding="utf-8") as f:
+            json.dump(self.to_dict(), f, indent=1)
+
+    # ------------------------------------------------------------------------------------------
+    # geometry
+
+    def _build_segments(self, tracks: list[Track]) -> None:
+        A, B, trk, s0 = [], [], [], []
+        self.track_length_m: dict[str, float] = {}
+        for ti, t in enumerate(tracks):
+            xyz = geodetic_deg_to_ecef(t.points_llh[:, 0], t.points_llh[:, 1], t.points_llh[:, 2])
+            seg = np.diff(xyz, axis=0)
+            length = np.linalg.norm(seg, axis=1)
+            keep = length > 1e-6  # repeated points make no segment
+            cum = np.concatenate(([0.0], np.cumsum(length)))
+            A.append(xyz[:-1][keep])
+            B.append(xyz[1:][keep])
+            s0.append(cum[:-1][keep])
+            trk.append(np.full(int(keep.sum()), ti))
+            self.track_length_m[t.id] = float(cum[-1])
+        self._track_ids = [t.id for t in tracks]
+        self._A = np.concatenate(A)
+        B = np.concatenate(B)
+        self._s0 = np.concatenate(s0)
+        self._trk = np.concatenate(trk)
+        d = B - self._A
+        self._len = np.linalg.norm(d, axis=1)
+        self._T = d / self._len[:, None]
+        mid = 0.5 * (self._A + B)
+        llh = ecef_to_geodetic(mid)
+        R = enu_rotation(llh[:, 0], llh[:, 1])
+        self._U = R[:, 2, :]
+        n = np.cross(self._U, self._T)
+        self._N = n / np.linalg.norm(n, axis=1)[:, None]  # horizontal, left of the tangent
+
+    def position_at(self, track: str, km: float) -> np.ndarray:
+        """ECEF point on a track at a chainage (for tests, balise placement, simulators)."""
+        t = self.tracks[track]
+        ti = self._track_ids.index(track)
+        s = (km - t.km_start) * 1000.0
+        m = np.flatnonzero(self._trk == ti)
+        j = m[np.clip(np.searchsorted(self._s0[m], s, side="right") - 1, 0, len(m) - 1)]
+        u = np.clip(s - self._s0[j], 0.0, self._len[j])
+        return self._A[j] + u * self._T[j]
+
+    def tangent_at(self, track: str, km: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(tangent, left horizontal normal, up) unit vectors in ECEF at a chainage."""
+        t = self.tracks[track]
+        ti = self._track_ids.index(track)
+        s = (km - t.km_start) * 1000.0
+        m = np.flatnonzero(self._trk == ti)
+        j = m[np.clip(np.searchsorted(self._s0[m], s, side="right") - 1, 0, len(m) - 1)]
+        return self._T[j], self._N[j], self._U[j]
+
+    # ------------------------------------------------------------------------------------------
+    # map matching
+
+    def match(self, position_m, covariance_m2=None, integrity_risk: float = DEFAULT_INTEGRITY_RISK,
+              gate_m: float = DEFAULT_MATCH_GATE_M) -> MapMatch:
+        """Match an ECEF antenna position (with its 3x3 ECEF covariance) to the track map."""
+        p = np.asarray(position_m, dtype=float)
+        if p.shape != (3,) or not np.all(np.isfinite(p)):
+            return _off_map("no valid position")
+        rel = p - self._A
+        u = np.clip(np.einsum("ij,ij->i", rel, self._T), 0.0, self._len)
+        d = rel - u[:, None] * self._T
+        dist = np.linalg.norm(d, axis=1)
+        # best segment per track
+        n_tr = len(self._track_ids)
+        best = np.full(n_tr, -1)
+        best_d = np.full(n_tr, np.inf)
+        order = np.lexsort((dist, self._trk))
+        first = np.ones(len(order), bool)
+        first[1:] = self._trk[order][1:] != self._trk[order][:-1]
+        for j in order[first]:
+            best[self._trk[j]] = j
+            best_d[self._trk[j]] = dist[j]
+        cross = {self._track_ids[k]: float(d[best[k]] @ self._N[best[k]]) for k in range(n_tr) if best[k] >= 0}
+        near = {k: v for k, v in cross.items() if abs(v) <= CANDIDATE_RADIUS_M}
+        k_best = int(np.argmin(best_d))
+        j = best[k_best]
+        tid = self._track_ids[k_best]
+        c = cross[tid]
+        if abs(c) > gate_m or best_d[k_best] > gate_m + 50.0:
+            m = _off_map(f"{abs(c):.1f} m from the nearest track {tid}, outside the {gate_m:.0f} m gate")
+            m.candidates = near
+            return m
+        # nearest track by horizontal cross-track offset among candidates
+        if near:
+            tid = min(near, key=lambda k: abs(near[k]))
+            k_best = self._track_ids.index(tid)
+            j = best[k_best]
+            c = near[tid]
+        tr = self.tracks[tid]
+        along = float(self._s0[j] + u[j])
+        vertical = float(d[j] @ self._U[j])
+        others = [abs(v - c) for k, v in near.items() if k != tid]
+        nearest_other = min(others) if others else math.inf
+        if covariance_m2 is None or not np.all(np.isfinite(covariance_m2)):
+            sig_a = sig_c = math.inf
+        else:
+            C = np.asarray(covariance_m2, dtype=float)
+            sig_a = math.sqrt(max(float(self._T[j] @ C @ self._T[j]), 0.0))
+            sig_c = math.sqrt(max(float(self._N[j] @ C @ self._N[j]), 0.0))
+        k = gaussian_k(integrity_risk)
+        apl, xpl = k * sig_a, k * sig_c
+        # confirmed when the protection region around the estimate stays on this track's side of the
+        # midline to every other track
+        confirmed = bool(math.isfinite(xpl) and (abs(c) + xpl < 0.5 * nearest_other if others else xpl < gate_m))
+        msg = "track confirmed" if confirmed else (
+            f"track not confirmed: cross-track PL {xpl:.2f} m against {nearest_other:.2f} m to the next track")
+        return MapMatch(tid, tr.line, tr.km_start + along / 1000.0, along, c, vertical, apl, xpl, confirmed,
+                        nearest_other, near, msg)
+
+
+def _off_map(msg: str) -> MapMatch:
+    return MapMatch(None, None, math.nan, math.nan, math.nan, math.nan, math.inf, math.inf, False, math.inf, {}, msg)
