@@ -22,7 +22,6 @@ observables and never mixed into them.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -37,26 +36,15 @@ from stations import constellation as const
 from stations.ionosphere import IonosphereField, delay_m
 from stations.kinematics import train_motion
 from stations.orbit_errors import OrbitClockErrors
+from stations.receiver_errors import GRADES, NoiseAndMultipath, ReceiverClocks, cnr_dbhz, elevation_scale
 from stations.scenario import Scenario, resolve_ionosphere
 from stations.track import TrackLine
+from stations.tracking import Tracking
 from stations.troposphere import WetResidualField, niell, zenith_delays_m
 
 TRANSIT_ITERATIONS = 3  # each iteration shrinks the transit-time error by v_sat/c ~ 1e-5
 NOMINAL_TRANSIT_S = 0.075
 BLOCK_EPOCHS = 60  # epochs computed together (vectorised); results do not depend on it
-AMBIGUITY_SPAN_CYCLES = 500  # new-arc ambiguities drawn in +-this: phase stays within ~100 m of code
-SLIP_MAX_CYCLES = 20
-HALF_CYCLE_RESOLVE_S = 6.0  # half-cycle ambiguity flagged until the receiver finds the preamble
-
-# Receiver grades: zenith noise split into white noise and AR(1) multipath, multipath correlation
-# time (static antennas see slow multipath, minutes; a moving antenna's decorrelates in seconds),
-# C/N0 at zenith, clock drift (geodetic OCXO-steered vs train TCXO).
-GRADES = {
-    "geodetic": dict(mp_tau_s=120.0, cnr_zenith=50.0, clock_drift=2e-10, clock_rw=1e-11),
-    "train": dict(mp_tau_s=3.0, cnr_zenith=46.0, clock_drift=5e-9, clock_rw=1e-10),
-}
-WHITE_SHARE_CODE = 0.5  # fraction of code error variance that is white (rest is multipath)
-WHITE_SHARE_PHASE = 0.7
 DOPPLER_NOISE_HZ = 0.02
 ATMO_RATE_STEP_S = 0.5  # half-step of the central difference giving the atmosphere's rate
 
@@ -181,31 +169,18 @@ class World:
         if not nz.enabled:
             self.sigma_code[:] = 0.0
             self.sigma_phase[:] = 0.0
-        self.multipath_on = nz.enabled and nz.multipath
-        self.mp_phi = np.exp(-self.dt / np.array([GRADES[r.grade]["mp_tau_s"] for r in self.receivers]))
         self.cnr_zenith = np.array([GRADES[r.grade]["cnr_zenith"] for r in self.receivers])
         # random streams, one per purpose, each drawn in fixed shapes per epoch (block-size free)
         ss = np.random.SeedSequence([sc.seed, 0x51A7])
-        self._rng_noise, self._rng_track, self._rng_clock = [np.random.default_rng(s) for s in ss.spawn(3)]
+        rng_noise, rng_track, rng_clock = [np.random.default_rng(s) for s in ss.spawn(3)]
         rng_init = np.random.default_rng([sc.seed, 0x1217])
-        drift_scale = np.array([GRADES[r.grade]["clock_drift"] for r in self.receivers])
-        self.clk_bias0 = rng_init.uniform(-5e-7, 5e-7, R)
-        self.clk_drift0 = rng_init.uniform(-1, 1, R) * drift_scale
-        self.clk_rw = np.array([GRADES[r.grade]["clock_rw"] for r in self.receivers])
-        if not errs.receiver_clock:
-            self.clk_bias0[:] = 0.0
-            self.clk_drift0[:] = 0.0
-            self.clk_rw[:] = 0.0
-        # sequential state
+        grades = [r.grade for r in self.receivers]
+        self.clocks = ReceiverClocks(grades, self.dt, errs.receiver_clock, rng_clock, rng_init)
         shape = (R, n, self.K)
-        self._mp_code = rng_init.standard_normal(shape)  # unit-variance AR(1) states
-        self._mp_phase = rng_init.standard_normal(shape)
-        self._clk_freq = self.clk_drift0.copy()
-        self._clk_bias = self.clk_bias0.copy()
-        self._tracking = np.zeros((R, n), bool)
-        self._lock_s = np.zeros(shape)
-        self._amb = np.zeros(shape)
-        self._half = np.zeros(shape)
+        self.noise = NoiseAndMultipath(shape, self.dt, self.sigma_code, self.sigma_phase,
+                                       [GRADES[g]["mp_tau_s"] for g in grades], nz.enabled and nz.multipath,
+                                       rng_noise, rng_init)
+        self.tracking = Tracking(shape, self.dt, errs.cycle_slips_per_hour, errs.half_cycle, rng_track)
         self._next_epoch = 0
 
     # -- set-up ---------------------------------------------------------------------------------
@@ -270,19 +245,6 @@ class World:
     def run(self, block: int = BLOCK_EPOCHS) -> list[EpochBlock]:
         return list(self.epochs(block))
 
-    def _clock_block(self, E: int):
-        """Receiver clock bias [s] and drift [s/s] per epoch: drift with random-walk frequency."""
-        R = len(self.receivers)
-        bias = np.empty((E, R))
-        freq = np.empty((E, R))
-        w = self._rng_clock.standard_normal((E, R))
-        for e in range(E):
-            bias[e] = self._clk_bias
-            freq[e] = self._clk_freq
-            self._clk_bias = self._clk_bias + self._clk_freq * self.dt
-            self._clk_freq = self._clk_freq + self.clk_rw * math.sqrt(self.dt) * w[e]
-        return bias, freq
-
     def _block(self, e0: int, e1: int) -> EpochBlock:
         E = e1 - e0
         R = len(self.receivers)
@@ -292,7 +254,7 @@ class World:
         t_tag = self.t_tags[e0:e1]
         rx = np.stack([r.ecef[e0:e1] for r in self.receivers], axis=1)  # (E, R, 3)
         rx_vel = np.stack([r.velocity[e0:e1] for r in self.receivers], axis=1)
-        dtr, dtr_dot = self._clock_block(E)
+        dtr, dtr_dot = self.clocks.block(E)
         t_rx = t_tag[:, None] - dtr  # true reception time (E, R)
 
         # satellites: truth = full-precision orbit and clock + error (the broadcast sets are these
@@ -373,10 +335,8 @@ class World:
         iono = delay_m(stec[..., None], self.freq_hz[None, None])  # (E, R, N, K)
         iono_rate = delay_m(stec_rate[..., None], self.freq_hz[None, None])
 
-        # elevation-dependent noise scale (RTKLIB-style a^2 + b^2/sin^2(el), a = b)
-        el_scale = np.sqrt(0.5 + 0.5 / np.sin(el_safe) ** 2)  # (E, R, N)
-        cnr = (self.cnr_zenith[None, :, None] - 20.0 * (1.0 - np.sin(el_safe)) ** 2)[..., None] \
-            - np.array([0.0, 3.0, 4.0][:K])[None, None, None, :]
+        el_scale = elevation_scale(el_safe)  # (E, R, N)
+        cnr = cnr_dbhz(self.cnr_zenith[None, :, None], el_safe, K)
 
         # visibility: mask, ephemeris, blockage, outage
         mask = np.radians(self.scenario.elevation_mask_deg)
@@ -389,9 +349,6 @@ class World:
         visible = valid & (el >= mask) & (el >= np.radians(blk)[:, :, None]) & ~outage[:, :, None]
 
         # sequential part: tracking (arcs, slips), AR(1) multipath, white noise
-        errs = self.scenario.errors
-        p_slip = errs.cycle_slips_per_hour / 3600.0 * self.dt
-        sig_exists = self.signal_exists[None]
         P = np.full((E, R, N, K), np.nan)
         L = np.full((E, R, N, K), np.nan)
         D = np.full((E, R, N, K), np.nan)
@@ -401,53 +358,22 @@ class World:
         amb = np.full((E, R, N, K), np.nan)
         mpc_out = np.zeros((E, R, N, K))
         mpp_out = np.zeros((E, R, N, K))
-        lam = self.wavelength_m[None]
+        lam = self.wavelength_m
         geo = rng + c * (dtr[:, :, None] - dts) + tropo  # non-dispersive part (E, R, N)
-        phi = self.mp_phi[:, None, None]
-        innov = np.sqrt(1 - phi**2)
-        sc_code = self.sigma_code[:, None, None]
-        sc_phase = self.sigma_phase[:, None, None]
+        phase_rate = (range_rate + c * (dtr_dot[:, :, None] - dts_dot) + tropo_rate)[..., None] - iono_rate
+        doppler_noise = DOPPLER_NOISE_HZ * (self.sigma_phase > 0)[:, None, None]
         for e in range(E):
-            z = self._rng_noise.standard_normal((4, R, N, K))
-            self._mp_code = phi * self._mp_code + innov * z[0]
-            self._mp_phase = phi * self._mp_phase + innov * z[1]
-            draw_slip = self._rng_track.random((R, N))
-            draw_amb = self._rng_track.integers(-AMBIGUITY_SPAN_CYCLES, AMBIGUITY_SPAN_CYCLES + 1, (R, N, K))
-            draw_jump = self._rng_track.integers(1, SLIP_MAX_CYCLES + 1, (R, N, K)) * \
-                self._rng_track.choice([-1, 1], (R, N, K))
-            draw_jump_on = self._rng_track.random((R, N, K)) < 0.6
-            draw_half = self._rng_track.random((R, N, K)) < 0.5
-            vis = visible[e]
-            new_arc = vis & ~self._tracking
-            slip = vis & ~new_arc & (draw_slip < p_slip)
-            jump = np.where(slip[..., None] & draw_jump_on, draw_jump, 0)
-            # a slip changes at least one signal's ambiguity
-            none = slip & ~(jump != 0).any(-1)
-            jump[..., 0] = np.where(none, draw_jump[..., 0], jump[..., 0])
-            self._amb = np.where(new_arc[..., None], draw_amb, self._amb + jump)
-            reset = new_arc[..., None] | (jump != 0)
-            self._lock_s = np.where(reset, 0.0, self._lock_s + self.dt)
-            if errs.half_cycle:
-                self._half = np.where(new_arc[..., None], np.where(draw_half, 0.5, 0.0), self._half)
-                self._half = np.where(self._lock_s >= HALF_CYCLE_RESOLVE_S, 0.0, self._half)
-            self._tracking = vis
-            obs = vis[..., None] & sig_exists[0]
-            es = el_scale[e][..., None]
-            mp_c = (sc_code * np.sqrt(1 - WHITE_SHARE_CODE) * es * self._mp_code) if self.multipath_on else 0.0
-            mp_p = (sc_phase * np.sqrt(1 - WHITE_SHARE_PHASE) * es * self._mp_phase) if self.multipath_on else 0.0
-            n_c = sc_code * np.sqrt(WHITE_SHARE_CODE) * es * z[2]
-            n_p = sc_phase * np.sqrt(WHITE_SHARE_PHASE) * es * z[3]
+            mp_c, mp_p, n_c, n_p, z_dop = self.noise.step(el_scale[e])
+            trk = self.tracking.step(visible[e])
+            obs = visible[e][..., None] & self.signal_exists[None]
             ge = geo[e][..., None]
-            ie = iono[e]
-            P[e] = np.where(obs, ge + ie + mp_c + n_c, np.nan)
-            L[e] = np.where(obs, (ge - ie + mp_p + n_p) / lam[0] + self._amb + self._half, np.nan)
-            phase_rate = (range_rate[e] + c * (dtr_dot[e][:, None] - dts_dot[e]) + tropo_rate[e])[..., None] \
-                - iono_rate[e]
-            D[e] = np.where(obs, -phase_rate / lam[0] + DOPPLER_NOISE_HZ * (sc_phase > 0) * z[3], np.nan)
+            P[e] = np.where(obs, ge + iono[e] + mp_c + n_c, np.nan)
+            L[e] = np.where(obs, (ge - iono[e] + mp_p + n_p) / lam + trk.ambiguity_cyc + trk.half_cycle, np.nan)
+            D[e] = np.where(obs, -phase_rate[e] / lam + doppler_noise * z_dop, np.nan)
             S[e] = np.where(obs, cnr[e], np.nan)
-            lli[e] = np.where(obs, (reset * 1 | (self._half != 0) * 2), 0).astype(np.int8)
-            lock[e] = np.where(obs, self._lock_s, np.nan)
-            amb[e] = np.where(obs, self._amb, np.nan)
+            lli[e] = np.where(obs, trk.lli, 0)
+            lock[e] = np.where(obs, trk.lock_time_s, np.nan)
+            amb[e] = np.where(obs, trk.ambiguity_cyc, np.nan)
             mpc_out[e] = np.where(obs, mp_c, 0.0)
             mpp_out[e] = np.where(obs, mp_p, 0.0)
         observed = ~np.isnan(P)

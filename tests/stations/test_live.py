@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import asyncio
 
-import pytest
 from pyrtcm import RTCMReader
 
 from ntrip_caster.config import CasterConfig
