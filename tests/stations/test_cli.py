@@ -55,3 +55,10 @@ def test_record_with_real_nav_file(shared_data, tmp_path):
     atmo = list(csv.DictReader(open(tmp_path / "atmosphere.csv")))
     sats = {r["sat"] for r in atmo}
     assert any(s.startswith("G") for s in sats) and any(s.startswith("C") for s in sats)
+
+
+def test_stations_run_refuses_a_bad_caster_address():
+    from stations.cli import stations_app
+
+    res = runner.invoke(stations_app, ["run", "demo", "--caster", "localhost"])
+    assert res.exit_code == 2 and "HOST:PORT" in res.output
