@@ -51,6 +51,11 @@ def nav_ephemerides_for(sc, nav_path: Path):
     return sc, ephs
 
 
+@stations_app.callback()
+def _stations() -> None:
+    """Simulated reference stations and trains, live (a group even with one command)."""
+
+
 @sim_app.command("list")
 def list_scenarios() -> None:
     """The built-in scenarios."""
