@@ -67,7 +67,7 @@ class BaselineConfig:
     # Initial SD ambiguity sigma [cycles]: set from code, so a few hundred cycles covers anything.
     amb_prior_sigma_cyc: float = 300.0
     # LAMBDA validation and confirmation.
-    fix_ratio: float = 3.0
+    fix_ratio: float = 2.0
     fix_min_success_rate: float = 0.9999
     fix_min_count: int = 4
     fix_confirm_epochs: int = 5
