@@ -112,3 +112,24 @@ def test_convbin_reads_our_rtcm_as_our_rinex(tmp_path):
                 assert np.max(np.abs(a[both] - b[both])) <= tol, (typ, sat)
                 checked += both.sum()
     assert checked > 1000
+
+
+def test_recording_reads_back(demo_recording):
+    from stations.recording import load_atmosphere, load_scenario_json, load_truth
+
+    sc, out, _ = demo_recording
+    truth = load_truth(out)
+    assert set(truth) == {s.id for s in sc.stations} | {t.id for t in sc.trains}
+    g = truth["G101"]
+    assert g.kind == "train" and len(g.t_gpst) == 30 and g.track[0] == "L1-1"
+    assert np.all(np.diff(g.km) > 0.03)  # 160 km/h: 44 m per second
+    assert np.allclose(g.at(g.t_gpst[5]), g.ecef_m[5])
+    with pytest.raises(KeyError):
+        g.at(g.t_gpst[0] + 0.5)
+    sta = truth["STA1"]
+    assert np.ptp(sta.ecef_m, axis=0).max() == 0.0 and np.isnan(sta.km).all()
+    atmo = load_atmosphere(out)
+    sel = (atmo["receiver"] == "STA1") & (atmo["sat"] == atmo["sat"][0])
+    assert sel.sum() == 30
+    assert np.all(atmo["tropo_m"] > 2.0) and np.all(atmo["iono_l1_m"] >= 0.0)
+    assert load_scenario_json(out)["name"] == "demo"
