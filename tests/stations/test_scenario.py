@@ -113,3 +113,30 @@ def test_readme_example_is_valid():
     w = World(sc.model_copy(update=dict(duration_s=3.0)))
     blk = w.run()[0]
     assert blk.observed.any()
+
+
+def test_builtin_geometry():
+    import numpy as np
+
+    from stations.world import World
+
+    def dist(w, a, b):
+        ids = w.receiver_ids
+        return np.linalg.norm(w.receivers[ids.index(a)].ecef[0] - w.receivers[ids.index(b)].ecef[0]) / 1e3
+
+    w = World(load_scenario("network-70km").model_copy(update=dict(duration_s=1.0)))
+    for st in ("NORTH", "EAST", "SOUTH", "WEST"):
+        assert 34.0 < dist(w, "check1", st) < 36.0
+    assert 69.0 < dist(w, "NORTH", "SOUTH") < 71.0 and 69.0 < dist(w, "EAST", "WEST") < 71.0
+    w = World(load_scenario("demo").model_copy(update=dict(duration_s=1.0)))
+    on_line = ["STA1", "STA2", "STA3", "STA4"]
+    gaps = [dist(w, a, b) for a, b in zip(on_line, on_line[1:])]
+    assert all(60.0 < g < 75.0 for g in gaps)
+    # off-line stations are well off the line (2-D geometry for the interpolation)
+    tl = w.track
+    from augnet.gnss.geometry import ecef_to_geodetic
+    for sid in ("OFF1", "OFF2"):
+        llh = ecef_to_geodetic(w.receivers[w.receiver_ids.index(sid)].ecef[0])
+        enu = np.array([[*tl.geodetic_to_plane(np.degrees(llh[0]), np.degrees(llh[1])), llh[2]]])
+        _, _, d = tl.nearest_track(enu)
+        assert d[0] > 15e3
