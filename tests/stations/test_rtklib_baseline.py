@@ -139,3 +139,46 @@ def test_rnx2rtkp_follows_the_moving_train(tmp_path):
     err = np.linalg.norm(xyz[fixed] - ref[fixed], axis=1)
     print(f"train G101: fixed {fixed.mean():.1%}, 3-D error RMS {np.sqrt(np.mean(err ** 2)) * 1e3:.1f} mm")
     assert np.percentile(err, 95) < 0.02
+
+
+@pytest.mark.rtklib
+def test_rnx2rtkp_refixes_after_the_tunnel(tmp_path):
+    """G101 enters the 2 km tunnel (km 100-102) 45 s in: RTKLIB loses the train, then fixes the new
+    ambiguity arcs after the exit and lands on the truth again (no stale ambiguities carried over)."""
+    rnx2rtkp = require_tool("rnx2rtkp")
+    sc = load_scenario("demo")
+    e = sc.errors
+    e = e.model_copy(update=dict(ionosphere=e.ionosphere.model_copy(update={"level": "off"}),
+                                 troposphere=e.troposphere.model_copy(update={"wet_residual_m": 0.0}),
+                                 cycle_slips_per_hour=0.0))
+    train = sc.trains[0].model_copy(update=dict(start_km=98.0))
+    sc = sc.model_copy(update=dict(duration_s=200.0, errors=e, trains=[train],
+                                   stations=[s for s in sc.stations if s.id == "STA2"]))
+    record(sc, tmp_path, rtcm=False)
+    base = _truth(tmp_path / "truth.csv", "STA2")
+    conf = tmp_path / "rtk.conf"
+    conf.write_text(CONFIG.format(x=base[0], y=base[1], z=base[2]))
+    out = tmp_path / "G101.pos"
+    subprocess.run([rnx2rtkp, "-k", str(conf), "-o", str(out), str(tmp_path / "G101.obs"),
+                    str(tmp_path / "STA2.obs"), str(tmp_path / "nav.rnx")],
+                   check=True, capture_output=True, timeout=120)
+    t, xyz, q = _read_pos(out)
+    rows = [r for r in csv.DictReader(open(tmp_path / "truth.csv")) if r["receiver"] == "G101"]
+    km = np.array([float(r["km"]) for r in rows])
+    t_truth = np.array([float(r["gpst_s"]) for r in rows]) % 86400.0
+    ecef = np.array([[float(r[k]) for k in ("x_m", "y_m", "z_m")] for r in rows])
+    idx = np.searchsorted(t_truth, t)
+    in_tunnel = (km[idx] > 100.0) & (km[idx] < 102.0)
+    assert not in_tunnel.any()  # no solution while the sky is hidden
+    before = km[idx] < 100.0
+    after = km[idx] > 102.0
+    assert np.mean(q[before] == 1) > 0.8 and after.sum() > 60
+    exit_t = t[after][0]
+    refixed = after & (q == 1)
+    assert refixed.any()
+    time_to_fix = t[refixed][0] - exit_t
+    err = np.linalg.norm(xyz[refixed] - ecef[idx[refixed]], axis=1)
+    print(f"tunnel: re-fixed {time_to_fix:.0f} s after the first epoch out, "
+          f"{np.mean(q[after] == 1):.0%} fixed after, 3-D error p95 {np.percentile(err, 95) * 1e3:.1f} mm")
+    assert time_to_fix < 60.0
+    assert np.percentile(err, 95) < 0.03
