@@ -70,6 +70,7 @@ class Limits:
     reposition_min_move_m: float = L.REPOSITION_MIN_MOVE_M
     base_switch_hysteresis_m: float = L.BASE_SWITCH_HYSTERESIS_M
     shutdown_drain_s: float = L.SHUTDOWN_DRAIN_S
+    max_auto_mounts: int = L.MAX_AUTO_MOUNTS
 
 
 @dataclass(frozen=True, slots=True)

@@ -64,5 +64,8 @@ BASE_SWITCH_HYSTERESIS_M = 500.0
 MAX_CLIENTS = 20_000
 MAX_CLIENTS_PER_MOUNT = 20_000
 MAX_CLIENTS_PER_IP = 0
+# Mountpoints unknown sources may create when the caster accepts them (open test casters): each
+# holds a table entry and statistics, so a hostile uploader must not create them without end.
+MAX_AUTO_MOUNTS = 1000
 # Seconds graceful shutdown waits for queued output to drain before closing connections.
 SHUTDOWN_DRAIN_S = 2.0

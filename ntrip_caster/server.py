@@ -555,6 +555,9 @@ class Caster:
     def _source_request(self, proto: CasterProtocol, req: NtripRequest) -> asyncio.Future | None:
         mount = self.mounts.get(req.mount) if req.valid_mount else None
         if mount is None and req.valid_mount and self.config.allow_unknown_sources:
+            if sum(1 for m in self.mounts.values() if m.auto) >= self.limits.max_auto_mounts:
+                proto.reject(503, "no more mountpoints can be created")
+                return None
             mount = Mountpoint(self, MountConfig(req.mount, "source", write=frozenset({PUBLIC})))
             mount.auto = True
             self.mounts[req.mount] = mount
@@ -608,6 +611,8 @@ class Caster:
         mount.source = None
         proto.mount = None
         log.info("source of %s gone", mount.name)
+        if mount.auto and not (mount.v1 or mount.v2 or mount.taps) and mount.n_clients == 0:
+            del self.mounts[mount.name]  # created by its source, forgotten with it
 
     def on_gga(self, s: ClientSession, line: bytes) -> None:
         now = time.monotonic()

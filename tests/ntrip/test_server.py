@@ -5,6 +5,7 @@ from __future__ import annotations
 import socket
 import time
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import replace
 
 import pytest
 
@@ -364,3 +365,17 @@ def test_gga_rate_limit_and_upload_flood():
         assert read_all(c, timeout=5) == b""
         assert ct.snapshot(clients=False)["mounts"]["NEAR"]["drops"] == {"upload_flood": 1}
         s1.close()
+
+
+def test_auto_mountpoints_are_bounded_and_forgotten():
+    cfg = replace(make_config(allow_unknown_sources=True), limits=Limits(max_auto_mounts=2))
+    with CasterThread(cfg) as ct:
+        a = open_v1_source(ct.port, "AUTO1", password="any")
+        b = open_v1_source(ct.port, "AUTO2", password="any")
+        s = connect(ct.port)
+        s.sendall(b"SOURCE any AUTO3\r\n\r\n")
+        assert read_all(s) == b"ERROR - Mount Point Taken or Invalid\r\n"
+        a.close()
+        wait_for(lambda: "AUTO1" not in ct.snapshot(clients=False)["mounts"])
+        open_v1_source(ct.port, "AUTO3", password="any").close()
+        b.close()
