@@ -379,3 +379,21 @@ def test_auto_mountpoints_are_bounded_and_forgotten():
         wait_for(lambda: "AUTO1" not in ct.snapshot(clients=False)["mounts"])
         open_v1_source(ct.port, "AUTO3", password="any").close()
         b.close()
+
+
+def test_plain_asyncio_loop_works_too(shared_data):
+    """uvloop is optional: the same caster on asyncio's own loop streams byte-identically."""
+    data = rtcm_sample(shared_data, n_bytes=10_000)
+    with CasterThread(make_config(), use_uvloop=False) as ct:
+        assert "uvloop" not in type(ct.loop).__module__
+        src = open_v1_source(ct.port, "OPEN")
+        c1, _ = open_client(ct.port, "OPEN", version=1, user=None)
+        c2, _ = open_client(ct.port, "OPEN", version=2, user=None)
+        _clients_on(ct, "OPEN", 2)
+        with ThreadPoolExecutor(2) as pool:
+            r1 = pool.submit(read_exactly, c1, len(data))
+            r2 = pool.submit(read_v2_body, c2, len(data))
+            src.sendall(data)
+            assert r1.result() == data and r2.result() == data
+        for s in (src, c1, c2):
+            s.close()
