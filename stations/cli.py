@@ -92,7 +92,11 @@ def record_cmd(
         except (ScenarioError, OSError, ValueError) as exc:
             typer.echo(f"error: {exc}", err=True)
             raise typer.Exit(2)
-    summary = record(sc, out, nav_ephemerides=ephs, rtcm=rtcm)
+    try:
+        summary = record(sc, out, nav_ephemerides=ephs, rtcm=rtcm)
+    except ScenarioError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2)
     speed = summary.seconds_simulated / max(summary.seconds_wall, 1e-9)
     typer.echo(f"{sc.name}: {summary.n_epochs} epochs x {len(summary.receivers)} receivers "
                f"({', '.join(summary.receivers)}) in {summary.seconds_wall:.1f} s = {speed:.0f}x real time")

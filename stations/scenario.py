@@ -106,6 +106,14 @@ class Station(_Strict):
     grade: Literal["geodetic", "train"] = "geodetic"
     outages: list[tuple[float, float]] = Field(default_factory=list)  # (from_s, to_s) since start
 
+    @field_validator("outages")
+    @classmethod
+    def _intervals(cls, v):
+        for a, b in v:
+            if not 0.0 <= a < b:
+                raise ValueError(f"outage ({a}, {b}): need 0 <= from_s < to_s")
+        return v
+
     @model_validator(mode="after")
     def _placed(self):
         absolute = [self.lat_deg, self.lon_deg, self.h_m]

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from pyproj import Transformer
 
-from stations.scenario import Line
+from stations.scenario import Line, Scenario, ScenarioError
 
 ARC_STEP_M = 10.0  # curve sampling: sagitta = step^2 / (8 R) = 2.5 mm at R = 5,000 m
 MAX_SEGMENT_M = 200.0  # straight sections are sampled too, so chainage lookups stay local
@@ -240,3 +240,21 @@ def _rounded_centre_line(pts: np.ndarray, radius_m: float):
     s_wp = np.array([s[int(np.argmin(np.linalg.norm(xy - p, axis=1)))] for p in wp_points])
     s_wp[0], s_wp[-1] = 0.0, s[-1]
     return xy, s, s_wp
+
+
+def check_on_line(sc: Scenario, line: TrackLine) -> None:
+    """Refuse kilometre posts beyond the end of the line (known only once the curves are built)."""
+    end_km = line.length_m / 1e3
+    bad = []
+    for i, st in enumerate(sc.stations):
+        if st.km is not None and st.km > end_km:
+            bad.append(f"stations.{i}.km = {st.km}")
+    for i, tr in enumerate(sc.trains):
+        if tr.start_km > end_km:
+            bad.append(f"trains.{i}.start_km = {tr.start_km}")
+    for i, blk in enumerate(sc.line.blockages):
+        if blk.start_km > end_km:
+            bad.append(f"line.blockages.{i}.start_km = {blk.start_km}")
+    if bad:
+        raise ScenarioError(f"scenario {sc.name}: " + "; ".join(f"{b}: beyond the end of the line (0 to "
+                                                                  f"{end_km:.3f} km)" for b in bad))

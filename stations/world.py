@@ -38,7 +38,7 @@ from stations.kinematics import train_motion
 from stations.orbit_errors import OrbitClockErrors
 from stations.receiver_errors import GRADES, NoiseAndMultipath, ReceiverClocks, cnr_dbhz, elevation_scale
 from stations.scenario import Scenario, resolve_ionosphere
-from stations.track import TrackLine
+from stations.track import TrackLine, check_on_line
 from stations.tracking import Tracking
 from stations.troposphere import WetResidualField, niell, zenith_delays_m
 
@@ -108,6 +108,8 @@ class World:
         self.dt = sc.interval_s
         self.t_tags = self.t0 + np.arange(self.n_epochs) * self.dt
         self.track = TrackLine(sc.line) if sc.line is not None else None
+        if self.track is not None:
+            check_on_line(sc, self.track)
         # constellation: our nominal one, or the satellites of a given nav file
         t_end = self.t_tags[-1]
         if nav_ephemerides is None:

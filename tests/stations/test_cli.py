@@ -62,3 +62,21 @@ def test_stations_run_refuses_a_bad_caster_address():
 
     res = runner.invoke(stations_app, ["run", "demo", "--caster", "localhost"])
     assert res.exit_code == 2 and "HOST:PORT" in res.output
+
+
+def test_km_beyond_the_line_refused(tmp_path):
+    import yaml
+    from importlib import resources
+
+    d = yaml.safe_load(resources.files("stations.scenarios").joinpath("demo.yaml").read_text())
+    d["trains"][0]["start_km"] = 500.0
+    d["stations"][0]["outages"] = [[30, 10]]
+    p = tmp_path / "far.yaml"
+    p.write_text(yaml.safe_dump(d))
+    res = runner.invoke(sim_app, ["record", str(p), "--out", str(tmp_path / "o")])
+    assert res.exit_code == 2 and "stations.0.outages" in res.output
+    d["stations"][0]["outages"] = []
+    p.write_text(yaml.safe_dump(d))
+    res = runner.invoke(sim_app, ["record", str(p), "--duration", "2", "--out", str(tmp_path / "o")])
+    assert res.exit_code == 2
+    assert "trains.0.start_km = 500.0: beyond the end of the line (0 to 222.2" in res.output
