@@ -55,7 +55,8 @@ class Blockage(_Strict):
     kind: Literal["tunnel", "cutting", "bridge"]  # bridge = an overbridge the train passes under
     start_km: float = Field(ge=0.0)
     end_km: float = Field(ge=0.0)
-    # Satellites below this elevation are hidden (cuttings); tunnels and bridges hide everything.
+    # Cuttings: wall angle seen straight across the track (less towards the track direction);
+    # tunnels and bridges hide everything.
     mask_deg: float = Field(default=90.0, ge=0.0, le=90.0)
 
     @model_validator(mode="after")

@@ -139,20 +139,25 @@ class TrackLine:
         return self.point(km * 1e3, offset_m, mast_m)
 
     # -- blockages ------------------------------------------------------------------------------
-    def blockage_mask_deg(self, s_from_m, s_to_m) -> np.ndarray:
-        """Highest elevation mask of any blockage the swept interval [s_from, s_to] touches.
+    def blockage_mask_deg(self, s_from_m, s_to_m) -> tuple[np.ndarray, np.ndarray]:
+        """Sky hidden over the swept interval [s_from, s_to]: (all-sky mask, cutting wall angle) [deg].
 
-        0 where the sky is open.  Tunnels and overbridges hide the whole sky (mask 90 deg), so any
-        touch between two epochs means loss of lock, even under a 15 m bridge passed in 0.2 s.
+        Tunnels and overbridges hide the whole sky (all-sky mask 90 deg), so any touch between two
+        epochs means loss of lock, even under a 15 m bridge passed in 0.2 s.  A cutting's walls hide
+        satellites across the track below `mask_deg`, less towards its ends (see `cutting_mask`).
+        0 where the sky is open.
         """
         a = np.minimum(s_from_m, s_to_m)
         b = np.maximum(s_from_m, s_to_m)
-        mask = np.zeros(np.shape(a))
+        full = np.zeros(np.shape(a))
+        wall = np.zeros(np.shape(a))
         for blk in self.line.blockages:
             hit = (a <= blk.end_km * 1e3) & (b >= blk.start_km * 1e3)
-            deg = 90.0 if blk.kind in ("tunnel", "bridge") else blk.mask_deg
-            mask = np.where(hit, np.maximum(mask, deg), mask)
-        return mask
+            if blk.kind in ("tunnel", "bridge"):
+                full = np.where(hit, 90.0, full)
+            else:
+                wall = np.where(hit, np.maximum(wall, blk.mask_deg), wall)
+        return full, wall
 
     # -- inverse: nearest track (used by tests and tools, independent of how points were made) --
     def nearest_track(self, enu: np.ndarray) -> tuple[list[str], np.ndarray, np.ndarray]:
@@ -258,3 +263,12 @@ def check_on_line(sc: Scenario, line: TrackLine) -> None:
     if bad:
         raise ScenarioError(f"scenario {sc.name}: " + "; ".join(f"{b}: beyond the end of the line (0 to "
                                                                   f"{end_km:.3f} km)" for b in bad))
+
+
+def cutting_mask_rad(wall_deg, azimuth_rad, heading_rad):
+    """Elevation below which a cutting's walls hide a satellite [rad].
+
+    The walls run along the track: a satellite straight across it is hidden below the wall angle,
+    one along the track sees down the cutting (tan(mask) scales with |sin(azimuth - heading)|).
+    """
+    return np.arctan(np.tan(np.radians(wall_deg)) * np.abs(np.sin(azimuth_rad - heading_rad)))

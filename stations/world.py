@@ -38,7 +38,7 @@ from stations.kinematics import train_motion
 from stations.orbit_errors import OrbitClockErrors
 from stations.receiver_errors import GRADES, NoiseAndMultipath, ReceiverClocks, cnr_dbhz, elevation_scale
 from stations.scenario import Scenario, resolve_ionosphere
-from stations.track import TrackLine, check_on_line
+from stations.track import TrackLine, check_on_line, cutting_mask_rad
 from stations.tracking import Tracking
 from stations.troposphere import WetResidualField, niell, zenith_delays_m
 
@@ -60,7 +60,9 @@ class Receiver:
     track_id: str = ""
     km: np.ndarray | None = None  # (n_epochs,) chainage [km] for trains
     speed_m_s: np.ndarray | None = None
-    swept_mask_deg: np.ndarray | None = None  # (n_epochs,) blockage elevation mask since last epoch
+    swept_mask_deg: np.ndarray | None = None  # (n_epochs,) all-sky blockage since the last epoch (90/0)
+    cutting_deg: np.ndarray | None = None  # (n_epochs,) cutting wall angle since the last epoch
+    heading_rad: np.ndarray | None = None  # (n_epochs,) azimuth of the direction of travel
     outage: np.ndarray | None = None  # (n_epochs,) bool: no data (station outage)
 
 
@@ -219,10 +221,14 @@ class World:
             unit /= np.maximum(np.linalg.norm(unit, axis=1, keepdims=True), 1e-12)
             vel = unit * m.speed_m_s[:, None]
             prev = np.concatenate([[m.s_m[0]], m.s_m[:-1]])
-            swept = self.track.blockage_mask_deg(prev, m.s_m)
+            swept, wall = self.track.blockage_mask_deg(prev, m.s_m)
+            llh0 = ecef_to_geodetic(ecef)
+            v_enu = np.einsum("eij,ej->ei", enu_rotation(llh0[:, 0], llh0[:, 1]), unit)
+            heading = np.arctan2(v_enu[:, 0], v_enu[:, 1])
             out.append(Receiver(tr.id, "train", 3000 + j, tr.grade, ecef, vel,
                                 track_id=self.track.track_id(tr.track), km=m.s_m / 1e3,
-                                speed_m_s=m.speed_m_s, swept_mask_deg=swept,
+                                speed_m_s=m.speed_m_s, swept_mask_deg=swept, cutting_deg=wall,
+                                heading_rad=heading,
                                 outage=np.zeros(self.n_epochs, bool)))
         return out
 
@@ -342,13 +348,14 @@ class World:
 
         # visibility: mask, ephemeris, blockage, outage
         mask = np.radians(self.scenario.elevation_mask_deg)
-        blk = np.zeros((E, R))
+        hidden = np.zeros((E, R, N), bool)
         outage = np.zeros((E, R), bool)
         for i, r in enumerate(self.receivers):
             if r.swept_mask_deg is not None:
-                blk[:, i] = r.swept_mask_deg[e0:e1]
+                wall = cutting_mask_rad(r.cutting_deg[e0:e1, None], az[:, i], r.heading_rad[e0:e1, None])
+                hidden[:, i] = (r.swept_mask_deg[e0:e1, None] >= 90.0) | (el[:, i] < wall)
             outage[:, i] = r.outage[e0:e1]
-        visible = valid & (el >= mask) & (el >= np.radians(blk)[:, :, None]) & ~outage[:, :, None]
+        visible = valid & (el >= mask) & ~hidden & ~outage[:, :, None]
 
         # sequential part: tracking (arcs, slips), AR(1) multipath, white noise
         P = np.full((E, R, N, K), np.nan)

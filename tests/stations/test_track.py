@@ -65,8 +65,16 @@ def test_nearest_track_recovers_track_and_km(demo):
 def test_blockage_touch_between_epochs(demo):
     sc, tl = demo
     # a 15 m overbridge at km 120 passed between two epochs 83 m apart still breaks lock
-    m = tl.blockage_mask_deg(np.array([119.95e3, 125e3, 30.5e3]), np.array([120.033e3, 125.08e3, 30.6e3]))
-    assert list(m) == [90.0, 0.0, 35.0]
+    full, wall = tl.blockage_mask_deg(np.array([119.95e3, 125e3, 30.5e3]),
+                                      np.array([120.033e3, 125.08e3, 30.6e3]))
+    assert list(full) == [90.0, 0.0, 0.0] and list(wall) == [0.0, 0.0, 35.0]
+
+
+def test_cutting_hides_across_not_along():
+    from stations.track import cutting_mask_rad
+    m = np.degrees(cutting_mask_rad(35.0, np.radians([0.0, 90.0, 180.0, 270.0, 45.0]), 0.0))
+    assert np.allclose(m[[0, 2]], 0.0) and np.allclose(m[[1, 3]], 35.0)
+    assert 0.0 < m[4] < 35.0
 
 
 def test_speed_profile_accelerates_brakes_and_stops():

@@ -304,3 +304,25 @@ def test_doppler_matches_the_phase_rate():
     static = D[:, ids.index("STA2"), :, 0] - D[:, ids.index("STA3"), :, 0]
     assert 250 < np.nanmax(np.abs(train)) < 440
     assert np.nanmax(np.abs(static)) < 100
+
+
+def test_cutting_hides_low_satellites_across_the_track():
+    sc = load_scenario("demo")
+    train = sc.trains[0].model_copy(update=dict(start_km=29.0))  # the cutting is at km 30-31.5
+    sc = sc.model_copy(update=dict(duration_s=60.0, trains=[train],
+                                   stations=[s for s in sc.stations if s.id == "STA1"]))
+    w, bl = _run(sc)
+    i = w.receiver_ids.index("G101")
+    rx = w.receivers[i]
+    inside = (rx.km > 30.05) & (rx.km < 31.45)
+    assert inside.sum() > 20
+    el = _cat(bl, "elevation_rad")[:, i]
+    az = _cat(bl, "azimuth_rad")[:, i]
+    seen = _cat(bl, "observed")[:, i].any(-1)
+    across = np.abs(np.sin(az - rx.heading_rad[:, None])) > 0.9
+    low = (el > np.radians(12)) & (el < np.radians(30))
+    assert (low & across)[inside].any()
+    assert not seen[inside][(low & across)[inside]].any()  # hidden by the walls
+    high = el > np.radians(40)
+    assert seen[inside][high[inside]].all()  # the sky overhead stays open
+    assert seen[~inside][(low & across)[~inside]].any()  # outside the cutting they are seen
