@@ -19,8 +19,6 @@ from .helpers import (STATION_PW, TRAIN_PW, make_config, open_client, open_v1_so
                       read_exactly, rtcm_sample, wait_for)
 from ..conftest import require_tool
 
-pytestmark = pytest.mark.rtklib
-
 
 PRIMING_FRAME = frame_rtcm3(b"\x3e\xd0priming")
 
@@ -55,6 +53,7 @@ def data(shared_data) -> bytes:
     return rtcm_sample(shared_data, n_bytes=40_000)
 
 
+@pytest.mark.rtklib
 def test_str2str_as_ntrip1_client(caster, data, tmp_path):
     str2str = require_tool("str2str")
     src = open_v1_source(caster.port, "BASE01")
@@ -74,6 +73,7 @@ def test_str2str_as_ntrip1_client(caster, data, tmp_path):
         src.close()
 
 
+@pytest.mark.rtklib
 def test_str2str_as_ntrip_source(caster, data, tmp_path):
     str2str = require_tool("str2str")
     feed = socket.create_server(("127.0.0.1", 0))
@@ -220,6 +220,7 @@ def test_curl_sees_401_404_503(tmp_path):
         src.close()
 
 
+@pytest.mark.rtklib
 def test_str2str_sends_gga_to_the_nearest_mount(caster, data, tmp_path):
     """RTKLIB 2.4.3 `-p lat lon hgt -n ms` sends a $GNGGA (0 satellites, fixed position) a second
     or two after connecting; the caster must keep it connected until then and pick its base."""
