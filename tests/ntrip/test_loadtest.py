@@ -42,3 +42,24 @@ def test_small_load_run(mode, source_version):
 def test_cli_rejects_bad_options():
     out = CliRunner().invoke(app, ["run", "--clients", "0"])
     assert out.exit_code == 2
+
+
+@pytest.mark.slow
+def test_external_target_path():
+    """`--target host:port --caster-pid` (how Millipede is measured): here our own caster in a
+    thread plays the external one, with a password-protected source and reader."""
+    import os
+
+    from ntrip_caster.embedded import CasterThread
+
+    from .helpers import STATION_PW, TRAIN_PW, make_config
+
+    with CasterThread(make_config()) as ct:
+        r = run_load(LoadSettings(clients=20, epochs=2, rate_hz=4.0, processes=1,
+                                  target=f"127.0.0.1:{ct.port}", caster_pid=os.getpid(),
+                                  source_mount="BASE01", source_password=STATION_PW,
+                                  mount="BASE01", user="train1", password=TRAIN_PW,
+                                  label="external"))
+    assert r["label"] == "external" and r["caster_fanout"] is None
+    assert (r["connected"], r["complete"], r["lost_epochs"], r["bad_frames"]) == (20, 20, 0, 0)
+    assert r["caster_rss_mb"] > 0
