@@ -326,6 +326,8 @@ async def open_source(host: str, port: int, mount: str, version: int, user: str 
     sock = writer.get_extra_info("socket")
     if sock is not None:
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    if version == 0:  # raw TCP into a relay's input (e.g. str2str -in tcpsvr:// -out ntripc://)
+        return reader, writer
     if version == 1:
         writer.write(f"SOURCE {password} /{mount}\r\nSource-Agent: NTRIP augnet-loadtest/0.1\r\n"
                      f"STR: \r\n\r\n".encode())
@@ -404,6 +406,7 @@ class LoadSettings:
     source_user: str = ""
     source_password: str = "loadtest"
     source_mount: str = ""
+    source_target: str = ""  # host:port the source connects to, when not the caster's port
     user: str = ""
     password: str = ""
     uvloop: bool = True
@@ -434,8 +437,13 @@ def run_load(s: LoadSettings) -> dict[str, Any]:
     pipes, procs = [], []
     try:
         loop = asyncio.new_event_loop()
+        src_host, src_port = host, port
+        if s.source_target:
+            src_host, _, src_port_text = s.source_target.rpartition(":")
+            src_port = int(src_port_text)
         reader, writer = loop.run_until_complete(open_source(
-            host, port, source_mount, s.source_version, s.source_user or None, s.source_password))
+            src_host, src_port, source_mount, s.source_version, s.source_user or None,
+            s.source_password))
         size = epoch_payload(s.size)
         # Workers and their clients.
         per = [s.clients // s.processes + (1 if i < s.clients % s.processes else 0)
@@ -465,7 +473,7 @@ def run_load(s: LoadSettings) -> dict[str, Any]:
 
         def send(seq: int) -> None:
             frame = epoch_frame(seq, time.monotonic_ns(), size)
-            writer.write(frame if s.source_version == 1 else encode_chunk(frame))
+            writer.write(encode_chunk(frame) if s.source_version == 2 else frame)
 
         async def epochs() -> tuple[float, float, int]:
             period = 1.0 / s.rate_hz
@@ -559,7 +567,10 @@ def run(
     mount: str = typer.Option("", help="Mountpoint clients read (default LOAD, or NEAR with --gga)."),
     target: str = typer.Option("", help="host:port of an external caster (default: spawn ours)."),
     caster_pid: int = typer.Option(0, help="PID of the external caster, for CPU and memory."),
-    source_version: int = typer.Option(1, help="1: SOURCE; 2: POST chunked."),
+    source_version: int = typer.Option(1, help="1: SOURCE; 2: POST chunked; 0: raw TCP (no "
+                                       "NTRIP handshake) to --source-target."),
+    source_target: str = typer.Option("", help="host:port for the source when it is not the "
+                                      "caster's port (e.g. str2str's tcpsvr input)."),
     source_user: str = typer.Option("", help="User for a v2 source."),
     source_password: str = typer.Option("loadtest", help="Source password."),
     source_mount: str = typer.Option("", help="Mountpoint the source publishes (default LOAD)."),
@@ -578,7 +589,8 @@ def run(
         clients=clients, epochs=epochs, rate_hz=rate, size=size, v2_fraction=v2_fraction,
         processes=processes, gga=gga, vrs=vrs, mount=mount, target=target, caster_pid=caster_pid,
         source_version=source_version, source_user=source_user, source_password=source_password,
-        source_mount=source_mount, user=user, password=password, uvloop=uvloop, label=label))
+        source_mount=source_mount, source_target=source_target, user=user, password=password,
+        uvloop=uvloop, label=label))
     text = json.dumps(result, indent=2)
     typer.echo(text)
     if output is not None:
