@@ -7,14 +7,14 @@ clocks, noise and multipath, tracking (arcs, ambiguities, cycle slips, blockages
 (epoch, receiver, satellite, signal).
 
 Observation equations (per receiver r, satellite s, signal k; metres unless cycles):
-    P = rho + c (dt_r - dt^s) + T + I_k + m_k + e_k
+    P = rho + c (dt_r - dt^s + tgd_k) + T + I_k + m_k + e_k
     L = [rho + c (dt_r - dt^s) + T - I_k + mu_k + eps_k] / lambda_k + N_k      [cycles]
     D = -[d(rho)/dt + c (d(dt_r)/dt - d(dt^s)/dt)] / lambda_k                     [Hz]
 rho: geometric range from the truth satellite position at transmission (broadcast + orbit error) to
 the receiver antenna at the true reception time, Earth rotation during transit included; dt^s:
 truth satellite clock (broadcast polynomial + relativistic term + clock error); dt_r: receiver
-clock; the epoch tag is true time + dt_r.  Group delays (TGD/BGD) are zero in the nominal
-constellation and not modelled.
+clock; the epoch tag is true time + dt_r.  Code also carries the broadcast satellite group delay of
+its signal (TGD/BGD, as a single-frequency user applies it; zero in the nominal constellation).
 
 Truth (positions, clocks, atmosphere per receiver and satellite, ambiguities) is returned beside the
 observables and never mixed into them.
@@ -29,7 +29,7 @@ import numpy as np
 from augnet.gnss import time as gtime
 from augnet.gnss.constants import (GM_BDS_M3_S2, GM_GAL_M3_S2, GM_GPS_M3_S2, OMEGA_E_BDS_RAD_S,
                                    OMEGA_E_GAL_RAD_S, OMEGA_E_GPS_RAD_S, SPEED_OF_LIGHT_M_S)
-from augnet.gnss.ephemeris import Ephemeris, NavigationData, satellite_state
+from augnet.gnss.ephemeris import Ephemeris, NavigationData, group_delay_s, satellite_state
 from augnet.gnss.geometry import ecef_to_geodetic, enu_rotation, geodetic_deg_to_ecef
 from augnet.gnss.signals import by_rinex
 from stations import constellation as const
@@ -302,6 +302,14 @@ class World:
         b_idx = self.nav.select(self.sats, t_tag)
         b_rows = self.nav.table.take(np.broadcast_to(np.maximum(b_idx, 0)[:, None, :], (E, R, N)))
         st_b = satellite_state(b_rows, t_rx3, -tau)
+        # satellite group delays as broadcast (TGD/BGD; zero in the nominal constellation): the code
+        # of signal k is late by them, exactly as a single-frequency user corrects it
+        group = np.zeros((E, R, N, K))
+        for sysl in np.unique(self.sat_system):
+            cols = self.sat_system == sysl
+            for k, code in enumerate(self.scenario.signals[sysl]):
+                gd = group_delay_s(b_rows, code)
+                group[..., k] = np.where(cols & ~np.isnan(gd), gd * c, group[..., k])
         dclk_err = dts - st_b.clock_bias_s
         orbit_err_range = np.einsum("erni,erni->ern", u, pos - st_b.position_m)
 
@@ -376,7 +384,7 @@ class World:
             trk = self.tracking.step(visible[e])
             obs = visible[e][..., None] & self.signal_exists[None]
             ge = geo[e][..., None]
-            P[e] = np.where(obs, ge + iono[e] + mp_c + n_c, np.nan)
+            P[e] = np.where(obs, ge + iono[e] + group[e] + mp_c + n_c, np.nan)
             L[e] = np.where(obs, (ge - iono[e] + mp_p + n_p) / lam + trk.ambiguity_cyc + trk.half_cycle, np.nan)
             D[e] = np.where(obs, -phase_rate[e] / lam + doppler_noise * z_dop, np.nan)
             S[e] = np.where(obs, cnr[e], np.nan)

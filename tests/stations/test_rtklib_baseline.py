@@ -182,3 +182,34 @@ def test_rnx2rtkp_refixes_after_the_tunnel(tmp_path):
           f"{np.mean(q[after] == 1):.0%} fixed after, 3-D error p95 {np.percentile(err, 95) * 1e3:.1f} mm")
     assert time_to_fix < 60.0
     assert np.percentile(err, 95) < 0.03
+
+
+@pytest.mark.rtklib
+@pytest.mark.shared_data
+def test_rnx2rtkp_single_point_exact_with_real_group_delays(shared_data, tmp_path):
+    """Errors off, real 2023 broadcast file (non-zero TGDs): RTKLIB's single-point solution, which
+    applies the broadcast clocks and group delays, lands on the truth to millimetres per system."""
+    rnx2rtkp = require_tool("rnx2rtkp")
+    from stations.cli import nav_ephemerides_for
+
+    sc = load_scenario("baseline-10km")
+    e = sc.errors
+    e = e.model_copy(update=dict(ionosphere=e.ionosphere.model_copy(update={"level": "off"}),
+                                 troposphere=e.troposphere.model_copy(update={"enabled": False}),
+                                 orbit_clock=e.orbit_clock.model_copy(update={"enabled": False}),
+                                 noise=e.noise.model_copy(update={"enabled": False}), receiver_clock=False))
+    sc, ephs = nav_ephemerides_for(sc.model_copy(update=dict(duration_s=3.0, errors=e)),
+                                   shared_data / "nav" / "brdm-2023-07-11.nav")
+    assert any(abs(x.tgd) > 1e-9 for x in ephs if x.system == "G")
+    record(sc, tmp_path, nav_ephemerides=ephs, rtcm=False)
+    truth = _truth(tmp_path / "truth.csv", "A")
+    for navsys in (1, 32):  # GPS L1 C/A with TGD; BeiDou B1I with TGD1 (incl. GEO)
+        conf = tmp_path / f"spp{navsys}.conf"
+        conf.write_text(f"pos1-posmode =single\npos1-navsys ={navsys}\npos1-ionoopt =off\n"
+                        "pos1-tropopt =off\npos1-elmask =10\nout-solformat =xyz\n")
+        out = tmp_path / f"spp{navsys}.pos"
+        subprocess.run([rnx2rtkp, "-k", str(conf), "-o", str(out), str(tmp_path / "A.obs"),
+                        str(tmp_path / "nav.rnx")], check=True, capture_output=True, timeout=60)
+        _, xyz, q = _read_pos(out)
+        assert len(xyz) == 3
+        assert np.max(np.linalg.norm(xyz - truth, axis=1)) < 0.005, navsys
