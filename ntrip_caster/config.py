@@ -6,6 +6,7 @@
     identifier = "augnet"       # CAS record
     operator = "Railway GNSS"
     country = "CHN"
+    admin_group = "admin"       # its users may GET /_stats (JSON statistics); "" disables it
 
     [limits]                    # any name of limits.py in lower case, e.g.
     max_clients = 20000
@@ -101,6 +102,8 @@ class CasterConfig:
     operator: str = ""
     country: str = ""
     realm: str = "augnet"
+    # Users of this group may read `GET /_stats` (JSON statistics); empty disables the endpoint.
+    admin_group: str = "admin"
     limits: Limits = Limits()
     users: dict[str, User] = field(default_factory=dict)
     mounts: tuple[MountConfig, ...] = ()
@@ -128,7 +131,7 @@ def config_from_dict(data: dict[str, Any]) -> CasterConfig:
         raise ConfigError(f"unknown top-level sections: {sorted(unknown)}")
     caster = dict(data.get("caster") or {})
     known = {"host", "port", "identifier", "operator", "country", "realm", "allow_unknown_sources",
-             "stats_path", "stats_interval_s"}
+             "stats_path", "stats_interval_s", "admin_group"}
     if set(caster) - known:
         raise ConfigError(f"[caster]: unknown keys {sorted(set(caster) - known)}")
 
@@ -160,6 +163,8 @@ def config_from_dict(data: dict[str, Any]) -> CasterConfig:
         name = m.pop("name")
         if name in seen:
             raise ConfigError(f"{where}: mountpoint {name!r} defined twice")
+        if name == "_stats":
+            raise ConfigError(f"{where}: '_stats' is the statistics path, not a mountpoint name")
         seen.add(name)
         kind = m.pop("kind", "source")
         if kind not in MOUNT_KINDS:
@@ -181,6 +186,7 @@ def config_from_dict(data: dict[str, Any]) -> CasterConfig:
             identifier=str(caster.get("identifier", "augnet")),
             operator=str(caster.get("operator", "")), country=str(caster.get("country", "")),
             realm=str(caster.get("realm", "augnet")),
+            admin_group=str(caster.get("admin_group", "admin")),
             limits=limits, users=users, mounts=tuple(mounts),
             allow_unknown_sources=bool(caster.get("allow_unknown_sources", False)),
             stats_path=caster.get("stats_path"),

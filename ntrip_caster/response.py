@@ -99,3 +99,15 @@ def error_response(version: int, status: int, message: str = "", *, realm: str =
                 ("Content-Length", str(len(body)))]
     first = f"{'HTTP/1.1' if version == 2 else 'HTTP/1.0'} {status} {_reason(status)}"
     return _lines(first, headers) + body
+
+
+def json_response(body: bytes) -> bytes:
+    """An HTTP/1.1 200 carrying a JSON document (the statistics endpoint)."""
+    return _lines("HTTP/1.1 200 OK", [
+        ("Server", SERVER_NAME),
+        ("Date", http_date()),
+        ("Connection", "close"),
+        ("Cache-Control", "no-store"),
+        ("Content-Type", "application/json"),
+        ("Content-Length", str(len(body))),
+    ]) + body

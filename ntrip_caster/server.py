@@ -32,7 +32,7 @@ from .errors import NtripProtocolError
 from .gga import GgaFix, parse_gga
 from .reposition import RepositionPolicy, choose_base
 from .request import NtripRequest
-from .response import (error_response, source_ok, sourcetable_response, stream_ok)
+from .response import error_response, json_response, source_ok, sourcetable_response, stream_ok
 from .rtcm_frames import RtcmFrameAligner
 from .sourcetable import CasRecord, StrRecord, filter_records, render_sourcetable
 from .stream_factory import StreamFactory, StreamHandle, load_factory
@@ -44,6 +44,10 @@ HOUSEKEEPING_INTERVAL_S = 0.5
 # Listen backlog: 10,000 trains reconnecting after a caster restart arrive within a second or two;
 # Linux caps this at net.core.somaxconn (4096 on current kernels).
 LISTEN_BACKLOG = 4096
+# Path of the statistics document (`GET /_stats`, admin group only; `?clients=0` leaves out the
+# per-client list). A leading underscore cannot clash with a station name in practice; the
+# configuration refuses a mountpoint of that name.
+STATS_PATH = "_stats"
 
 
 class SourceSession:
@@ -495,6 +499,8 @@ class Caster:
         return render_sourcetable(records)
 
     def _client_request(self, proto: CasterProtocol, req: NtripRequest) -> asyncio.Future | None:
+        if req.mount == STATS_PATH and self.config.admin_group:
+            return self._stats_request(proto, req)
         mount = self.mounts.get(req.mount) if req.valid_mount else None
         if mount is None or not mount.live:
             if req.mount and req.version == 2:
@@ -516,6 +522,23 @@ class Caster:
             self._admit_client(proto, req, mount, user)
 
         return self._authenticate(req, mount.cfg.read, decided)
+
+    def _stats_request(self, proto: CasterProtocol, req: NtripRequest) -> asyncio.Future | None:
+        """`GET /_stats` by a user of the admin group: the statistics snapshot as JSON."""
+        group = frozenset({self.config.admin_group})
+
+        def decided(user: str | None) -> None:
+            if proto.closed:
+                return
+            if user is None or not self.auth.allowed(user, group):
+                proto.reject(401, "statistics need an admin user")
+                return
+            body = json.dumps(self.snapshot(clients="clients=0" not in req.query)).encode()
+            self.counters["stats_requests"] += 1
+            proto.transport.write(json_response(body))
+            proto.close()
+
+        return self._authenticate(req, group, decided)
 
     def _admit_client(self, proto: CasterProtocol, req: NtripRequest, mount: Mountpoint,
                       user: str | None) -> None:
@@ -554,7 +577,8 @@ class Caster:
 
     def _source_request(self, proto: CasterProtocol, req: NtripRequest) -> asyncio.Future | None:
         mount = self.mounts.get(req.mount) if req.valid_mount else None
-        if mount is None and req.valid_mount and self.config.allow_unknown_sources:
+        if mount is None and req.valid_mount and self.config.allow_unknown_sources \
+                and req.mount != STATS_PATH:
             if sum(1 for m in self.mounts.values() if m.auto) >= self.limits.max_auto_mounts:
                 proto.reject(503, "no more mountpoints can be created")
                 return None

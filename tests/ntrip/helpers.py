@@ -23,6 +23,7 @@ def make_config(*, limits: Limits | None = None, extra_mounts: tuple[MountConfig
         "train1": User("train1", hash_password(TRAIN_PW, **FAST), frozenset({"trains"})),
         "station1": User("station1", hash_password(STATION_PW, **FAST), frozenset({"stations"})),
         "intruder": User("intruder", hash_password("x", **FAST), frozenset({"visitors"})),
+        "ops": User("ops", hash_password("ops-secret", **FAST), frozenset({"admin"})),
     }
     mounts = (
         MountConfig("OPEN", "source", frozenset({PUBLIC}), frozenset({"stations"}),

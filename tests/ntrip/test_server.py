@@ -397,3 +397,29 @@ def test_plain_asyncio_loop_works_too(shared_data):
             assert r1.result() == data and r2.result() == data
         for s in (src, c1, c2):
             s.close()
+
+
+def test_stats_endpoint_for_admins_only(caster):
+    src = open_v1_source(caster.port, "BASE01")
+    c, _ = open_client(caster.port, "BASE01")
+    _clients_on(caster, "BASE01", 1)
+
+    def get(path: str, user: str | None, password: str = "") -> bytes:
+        s = connect(caster.port)
+        auth = f"Authorization: {basic(user, password)}\r\n" if user else ""
+        s.sendall(f"GET {path} HTTP/1.1\r\nNtrip-Version: Ntrip/2.0\r\n{auth}\r\n".encode())
+        return read_all(s)
+
+    reply = get("/_stats", "ops", "ops-secret")
+    head, _, body = reply.partition(b"\r\n\r\n")
+    assert head.startswith(b"HTTP/1.1 200 OK") and b"Content-Type: application/json" in head
+    import json
+
+    stats = json.loads(body)
+    assert stats["mounts"]["BASE01"]["clients"] == 1 and stats["clients"][0]["user"] == "train1"
+    assert json.loads(get("/_stats?clients=0", "ops", "ops-secret").partition(b"\r\n\r\n")[2]
+                      )["clients"] == []
+    assert get("/_stats", None).startswith(b"HTTP/1.1 401")
+    assert get("/_stats", "train1", TRAIN_PW).startswith(b"HTTP/1.1 401")
+    c.close()
+    src.close()
