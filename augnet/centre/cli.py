@@ -1,0 +1,42 @@
+"""Command line of the control centre: `augnet vrs` (post-processed virtual RINEX) and `augnet centre ...`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+app = typer.Typer(no_args_is_help=True, help="The network engine (control centre).")
+
+
+def vrs(
+    record: Path = typer.Option(..., "--record", help="folder of reference-station RINEX files or a `sim record` output"),
+    at: str = typer.Option(..., "--at", help="the VRS point: LAT,LON,H (degrees, degrees, ellipsoidal m) or X,Y,Z (ECEF m)"),
+    out: Path = typer.Option(..., "--out", help="virtual RINEX 3.04 observation file to write"),
+    nav: Optional[Path] = typer.Option(None, "--nav", help="broadcast navigation file (default: the folder's, e.g. nav.rnx)"),
+    coords: Optional[Path] = typer.Option(None, "--coords", help="station coordinates: NAME X Y Z or NAME LAT LON H per line"),
+    exclude: Optional[List[str]] = typer.Option(None, "--exclude", help="a station to leave out (a rover); repeatable"),
+    master: Optional[str] = typer.Option(None, "--master", help="network master station (default: the most central)"),
+    name: str = typer.Option("VRS", "--name", help="marker name of the virtual station"),
+) -> None:
+    """Write a virtual reference station RINEX file for a point from a network's observation files."""
+    from augnet.centre.postprocess import PostprocessError, run_vrs
+
+    try:
+        result, lines = run_vrs(record, at, out, nav=nav, coords=coords, exclude=exclude or (), master=master,
+                                marker_name=name)
+    except PostprocessError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2)
+    for line in lines:
+        typer.echo(line)
+    typer.echo(f"wrote {out}: {len(result.epochs)} epochs")
+
+
+@app.command("run")
+def run() -> None:
+    """The live control centre (arrives with the caster integration of issue 5; not available yet)."""
+    typer.echo("augnet centre run: the live centre is not built yet; it arrives with the caster integration "
+               "(issue 5). For post-processing use `augnet vrs`.", err=True)
+    raise typer.Exit(1)

@@ -1,0 +1,575 @@
+"""Post-processed network RTK: reference-station RINEX files in, a virtual RINEX for one point out.
+
+What network operators serve to surveyors: from a folder of reference-station observation files (RINEX
+2.11 or 3.x, plain or gzip; or a `augnet sim record` folder) and a broadcast navigation file, the network is
+solved epoch by epoch (`network.NetworkSolver`) and a virtual reference station (VRS) is synthesised at the
+requested point (`vrs.synthesize`), then written as RINEX 3.04 that any RTK engine takes as its base.
+
+Epoch alignment. Stations may record at different intervals (1-30 s), start and stop at different times,
+or miss epochs. The epochs processed are the time tags at least `MIN_STATIONS_PER_EPOCH` stations share
+(a 1 s station beside a 30 s one gives 30 s epochs); at each one the network solves with the stations
+present and the VRS takes its nearest present station as master.
+
+Satellites in the VRS. Where the network has fixed ambiguities around the point, the VRS carries the
+satellites it has corrections for (interpolated dispersive and non-dispersive DD residuals). While it has
+fewer than `MIN_CORRECTED_SATELLITES` of them (no baseline fixed yet, or a network too sparse to fix, as in
+30 s data over 8 minutes on 35-150 km baselines), the epoch is a single-base VRS: the master's observations
+moved geometrically to the point (range, satellite clock, Earth rotation, troposphere model) without
+atmospheric corrections, so a rover sees the master's ionosphere and troposphere errors (decimetres on a
+35 km baseline) but a base at the point. A satellite that switches from single-base to network-corrected
+gets a loss-of-lock flag, so a rover restarts its ambiguity instead of absorbing a centimetre-level step;
+so do all satellites when the master station changes (another receiver clock and other ambiguities).
+
+Station coordinates come from the RINEX headers (APPROX POSITION XYZ plus ANTENNA: DELTA H/E/N) or from a
+coordinates file (`read_coordinates`): one station a line, `NAME X Y Z` (ECEF metres) or
+`NAME LAT LON H` (degrees, degrees, ellipsoidal metres), blank- or comma-separated, `#` starts a comment.
+The network needs surveyed coordinates: header approximate positions of real stations usually are, but a
+coordinates file is the way to be sure. Antenna phase-centre offsets and variations are not modelled.
+"""
+
+from __future__ import annotations
+
+import gzip
+import json
+import math
+import os
+import re
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from augnet.centre.network import NetworkSolver
+from augnet.centre.observations import StationEpoch, from_obsdata
+from augnet.centre.vrs import geometry_many, synthesize
+from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
+from augnet.gnss.ephemeris import NavigationData
+from augnet.gnss.geometry import ecef_to_geodetic, enu_to_ecef, geodetic_deg_to_ecef
+from augnet.gnss.rinex import RinexError, read_nav, read_obs
+from augnet.gnss.rinex.obs import ObsData, ObsHeader, empty_obs, to_rinex3_types, write_obs
+
+C = SPEED_OF_LIGHT_M_S
+# An epoch is processed when at least this many stations observed it: one baseline is the least a network
+# solution (and so anything beyond a single-base shift) needs.
+MIN_STATIONS_PER_EPOCH = 2
+# Network-corrected satellites a VRS epoch needs to be written as such: an RTK rover needs at least four
+# double differences (five satellites) to position; with fewer the epoch is a single-base VRS instead.
+MIN_CORRECTED_SATELLITES = 5
+# Time tags of different stations are the same epoch when they agree to this [s] (RINEX writes 0.1 us).
+EPOCH_MATCH_S = 1e-3
+# A baseline counts as fixed at an epoch when at least this share of its DD ambiguities is fixed.
+BASELINE_FIXED_SHARE = 0.5
+# |value| above which a coordinate triple is ECEF metres rather than latitude/longitude degrees (no
+# latitude or longitude exceeds 360 degrees; no point on Earth is within 6000 km of its centre).
+ECEF_MIN_COMPONENT_M = 1.0e4
+# An approximate position this close to the Earth's centre [m] is a header that does not know its position.
+MIN_STATION_RADIUS_M = 6.0e6
+VRS_MARKER_NAME = "VRS"
+PROGRAM = "augnet vrs"
+LLI_LOSS_OF_LOCK = 1  # RINEX LLI bit 0
+
+# File name patterns of observation and navigation files (RINEX 2 short names end in o/n/g/p, RINEX 3
+# long names in _MO/_GN/_MN/...; recordings write <id>.obs and nav.rnx). The first header line decides.
+_OBS_NAME = re.compile(r"(\.\d\d[oO]|\.obs|\.rnx|\.OBS|\.RNX)(\.gz)?$")
+_OBS_ONLY_NAME = re.compile(r"(\.\d\d[oO]|\.obs|\.OBS)(\.gz)?$")
+_NAV_NAME = re.compile(r"(\.\d\d[nNpP]|\.nav|\.rnx|\.NAV|\.RNX)(\.gz)?$")
+
+
+class PostprocessError(ValueError):
+    """Bad input for post-processing, with a message naming the file or option."""
+
+
+# --------------------------------------------------------------------------------------------
+# input
+
+
+def parse_point(text: str, what: str = "--at") -> np.ndarray:
+    """`LAT,LON,H` (degrees, degrees, ellipsoidal metres) or `X,Y,Z` (ECEF metres) -> ECEF (3,)."""
+    parts = [p for p in re.split(r"[,\s]+", text.strip()) if p]
+    if len(parts) != 3:
+        raise PostprocessError(f"{what}: expected three numbers LAT,LON,H or X,Y,Z, got {text!r}")
+    try:
+        v = np.array([float(p) for p in parts])
+    except ValueError:
+        raise PostprocessError(f"{what}: not numbers: {text!r}") from None
+    if not np.isfinite(v).all():
+        raise PostprocessError(f"{what}: not finite: {text!r}")
+    if np.abs(v).max() > ECEF_MIN_COMPONENT_M:
+        if np.linalg.norm(v) < MIN_STATION_RADIUS_M:
+            raise PostprocessError(f"{what}: ECEF point {text!r} is {np.linalg.norm(v) / 1e3:.0f} km from the "
+                                   "Earth's centre, not on its surface")
+        return v
+    lat, lon, h = v
+    if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 360.0):
+        raise PostprocessError(f"{what}: latitude {lat} / longitude {lon} out of range")
+    return np.asarray(geodetic_deg_to_ecef(lat, lon, h), float).reshape(3)
+
+
+def read_coordinates(path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """A coordinates file: `NAME X Y Z` or `NAME LAT LON H` per line -> {NAME (upper case): ECEF (3,)}."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise PostprocessError(f"coordinates file {path}: cannot read ({exc})") from None
+    out: dict[str, np.ndarray] = {}
+    for ln, line in enumerate(text.splitlines(), 1):
+        body = line.split("#", 1)[0].strip()
+        if not body:
+            continue
+        parts = [p for p in re.split(r"[,\s]+", body) if p]
+        if len(parts) != 4:
+            raise PostprocessError(f"{path}:{ln}: expected NAME X Y Z or NAME LAT LON H, got {body!r}")
+        try:
+            out[parts[0].upper()] = parse_point(",".join(parts[1:]), f"{path}:{ln} ({parts[0]})")
+        except PostprocessError as exc:
+            raise PostprocessError(str(exc)) from None
+    if not out:
+        raise PostprocessError(f"coordinates file {path}: no stations in it")
+    return out
+
+
+def _first_line(path: Path) -> str:
+    opener = gzip.open if path.name.endswith(".gz") else open
+    try:
+        with opener(path, "rt", errors="replace") as f:
+            return f.readline()
+    except (OSError, EOFError):
+        return ""
+
+
+def _rinex_kind(path: Path) -> str | None:
+    """'O' observation, 'N' navigation (GPS or mixed), or None: from the first header line."""
+    line = _first_line(path)
+    if "RINEX VERSION / TYPE" not in line:
+        return None
+    kind = line[20:21].upper()
+    if kind == "O":
+        return "O"
+    if kind == "N":  # RINEX 3 (any system) or RINEX 2 GPS navigation
+        return "N"
+    return None
+
+
+def station_name(path: Path, header: ObsHeader) -> str:
+    """The station's name: the 4-character site of a RINEX 2 short name (`delf0010.21o` -> DELF) or RINEX 3
+    long name (`DELF00NLD_R_...` -> DELF), else the file stem (`NORTH.obs` -> NORTH)."""
+    name = path.name[:-3] if path.name.endswith(".gz") else path.name
+    if re.fullmatch(r"[A-Za-z0-9]{4}\d{3}[A-Za-z0-9]\.\d\d[oO]", name):
+        return name[:4].upper()
+    if re.fullmatch(r"[A-Za-z0-9]{4}\d\d[A-Z]{3}_[A-Z]_.*", name):
+        return name[:4].upper()
+    return Path(name).stem or header.marker_name
+
+
+@dataclass
+class Station:
+    name: str
+    path: Path
+    obs: ObsData  # RINEX 3 type names
+    xyz_m: np.ndarray  # antenna reference point, ECEF
+    source: str  # where the coordinates came from
+
+
+@dataclass
+class NetworkInput:
+    stations: list[Station]
+    nav_path: Path
+    nav: NavigationData
+    excluded: list[str]  # names left out, with the reason
+    recording: bool
+
+
+def _recording_non_stations(folder: Path) -> dict[str, str]:
+    """In a `sim record` folder: receiver ids that are not reference stations (check receivers, trains)."""
+    try:
+        sc = json.loads((folder / "scenario.json").read_text())
+    except (OSError, ValueError) as exc:
+        raise PostprocessError(f"{folder / 'scenario.json'}: cannot read the recording's scenario ({exc})") from None
+    out = {}
+    for st in sc.get("stations", []):
+        if str(st.get("id", "")).lower().startswith("check"):
+            out[str(st["id"])] = "check receiver (rover), not a reference station"
+    for tr in sc.get("trains", []):
+        out[str(tr.get("id"))] = "train receiver, not a reference station"
+    return out
+
+
+def load_network(folder: str | os.PathLike, nav: str | os.PathLike | None = None,
+                 coords: str | os.PathLike | None = None, exclude: tuple[str, ...] | list[str] = ()) -> NetworkInput:
+    """Find and read the reference stations' observation files and the navigation file of a folder."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise PostprocessError(f"--record {folder}: not a folder")
+    recording = (folder / "scenario.json").is_file()
+    skip = _recording_non_stations(folder) if recording else {}
+    for e in exclude:
+        skip[e] = "excluded (--exclude)"
+    skip_upper = {k.upper(): v for k, v in skip.items()}
+    files = sorted(p for p in folder.iterdir() if p.is_file())
+    obs_files = []
+    for p in files:
+        if not _OBS_NAME.search(p.name):
+            continue
+        kind = _rinex_kind(p)
+        if kind == "O":
+            obs_files.append(p)
+        elif kind is None and _OBS_ONLY_NAME.search(p.name):
+            raise PostprocessError(f"{p}: named like an observation file but not RINEX (its first line has no "
+                                   "'RINEX VERSION / TYPE')")
+    if nav is None:
+        candidates = [p for p in files if _NAV_NAME.search(p.name) and _rinex_kind(p) == "N"]
+        if not candidates:
+            raise PostprocessError(f"{folder}: no RINEX navigation file found (give one with --nav)")
+        nav_path = next((p for p in candidates if p.name == "nav.rnx"), candidates[0])
+    else:
+        nav_path = Path(nav)
+        if not nav_path.is_file():
+            raise PostprocessError(f"--nav {nav_path}: no such file")
+    try:
+        nav_data = NavigationData(read_nav(nav_path).ephemerides)
+    except RinexError as exc:
+        raise PostprocessError(f"navigation file: {exc}") from None
+    if not len(nav_data):
+        raise PostprocessError(f"navigation file {nav_path}: no GPS/Galileo/BeiDou/QZSS ephemerides")
+    if not obs_files:
+        raise PostprocessError(f"{folder}: no RINEX observation files (*.obs, *.rnx, *.yyo, plain or .gz)")
+    table = read_coordinates(coords) if coords is not None else {}
+    stations: list[Station] = []
+    excluded: list[str] = []
+    for p in obs_files:
+        try:
+            data = read_obs(p)
+        except RinexError as exc:
+            raise PostprocessError(str(exc)) from None
+        name = station_name(p, data.header)
+        marker = data.header.marker_name.strip()
+        reason = skip_upper.get(name.upper()) or skip_upper.get(marker.upper())
+        if reason:
+            excluded.append(f"{name}: {reason}")
+            continue
+        if any(s.name == name for s in stations):
+            raise PostprocessError(f"{p}: a second observation file of station {name}")
+        data = to_rinex3_types(data)
+        approx = np.asarray(data.header.approx_position_m, float)
+        if name.upper() in table or marker.upper() in table:
+            marker_xyz = table.get(name.upper(), table.get(marker.upper()))
+            source = f"coordinates file {Path(coords).name}"
+        elif np.linalg.norm(approx) > MIN_STATION_RADIUS_M:
+            marker_xyz, source = approx, "RINEX header"
+        else:
+            raise PostprocessError(f"{p}: APPROX POSITION XYZ missing or zero and {name} is not in a coordinates "
+                                   "file (give --coords)")
+        h, e, n = data.header.antenna_delta_hen_m
+        xyz = np.asarray(marker_xyz, float) + enu_to_ecef(np.array([e, n, h], float), marker_xyz).reshape(3)
+        stations.append(Station(name, p, data, xyz, source))
+    unknown = [e for e in exclude if e.upper() not in {x.split(":")[0].upper() for x in excluded}]
+    if unknown:
+        raise PostprocessError(f"--exclude {' '.join(unknown)}: no such station in {folder}")
+    if len(stations) < MIN_STATIONS_PER_EPOCH:
+        raise PostprocessError(f"{folder}: {len(stations)} reference station(s) "
+                               f"({', '.join(s.name for s in stations) or 'none'}); a network needs at least "
+                               f"{MIN_STATIONS_PER_EPOCH}")
+    return NetworkInput(stations, nav_path, nav_data, excluded, recording)
+
+
+def align_epochs(stations: list[Station], min_stations: int = MIN_STATIONS_PER_EPOCH):
+    """The epochs at least `min_stations` stations share: (times (E,), {name: (E,) row index or -1})."""
+    keys = {}
+    for st in stations:
+        keys[st.name] = {int(round(t / EPOCH_MATCH_S)): i for i, t in enumerate(st.obs.times)
+                         if st.obs.flags[i] in (0, 1, 6)}
+    counts = Counter(k for ks in keys.values() for k in ks)
+    common = np.array(sorted(k for k, c in counts.items() if c >= min_stations), dtype=np.int64)
+    rows = {name: np.array([ks.get(int(k), -1) for k in common], dtype=int) for name, ks in keys.items()}
+    return common * EPOCH_MATCH_S, rows
+
+
+# --------------------------------------------------------------------------------------------
+# processing
+
+
+@dataclass
+class BaselineSummary:
+    name: str
+    length_km: float
+    epochs: int = 0  # epochs both stations had data and the baseline produced a solution
+    fixed_share_sum: float = 0.0
+    first_epoch_t: float | None = None
+    first_fix_t: float | None = None  # first epoch with BASELINE_FIXED_SHARE of its DDs fixed
+    last_fixed_share: float = 0.0
+
+    @property
+    def mean_fixed_fraction(self) -> float:
+        return self.fixed_share_sum / self.epochs if self.epochs else 0.0
+
+    @property
+    def time_to_first_fix_s(self) -> float | None:
+        if self.first_fix_t is None or self.first_epoch_t is None:
+            return None
+        return self.first_fix_t - self.first_epoch_t
+
+
+@dataclass
+class VrsResult:
+    point_ecef_m: np.ndarray
+    stations: list[Station]
+    excluded: list[str]
+    master: str  # network master station
+    vrs_masters: Counter  # epochs per VRS master station
+    epochs: list[StationEpoch]  # the VRS, epoch by epoch (empty epochs left out)
+    epoch_mode: list[str]  # per written epoch: 'network' or 'single-base'
+    corrected_sats: list[int]  # per written epoch: satellites with network corrections
+    times_processed: int
+    skipped_epochs: int  # processed epochs with nothing to write (master without satellites above the point)
+    baselines: dict[str, BaselineSummary]
+    misclosures: int = 0
+    seconds_wall: float = 0.0
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def network_epochs(self) -> int:
+        return sum(m == "network" for m in self.epoch_mode)
+
+    def interval_s(self) -> float | None:
+        t = np.array([e.t_gpst for e in self.epochs])
+        if len(t) < 2:
+            return None
+        d = np.round(np.diff(t), 3)
+        return float(Counter(d.tolist()).most_common(1)[0][0])
+
+
+def _station_clocks(net: NetworkSolver) -> dict[str, float]:
+    clocks: dict[str, float] = {}
+    for solver in net.solvers.values():
+        clocks.setdefault(solver.name_a, solver.clock["a"])
+        clocks.setdefault(solver.name_b, solver.clock["b"])
+    return clocks
+
+
+def single_base_epoch(master: StationEpoch, master_xyz_m, point_ecef_m, nav: NavigationData,
+                      clock_s: float) -> StationEpoch:
+    """The master's observations moved geometrically to the point, no atmospheric corrections (the VRS
+    synthesis of `vrs.py` with zero interpolated corrections, for every satellite)."""
+    g_m, trop_m, _ = geometry_many(master.sats, master.t_gpst, clock_s, master_xyz_m, nav)
+    g_v, trop_v, el_v = geometry_many(master.sats, master.t_gpst, clock_s, point_ecef_m, nav)
+    shift = ((g_v - g_m) + (trop_v - trop_m))[0]  # (S,)
+    use = np.isfinite(shift) & (el_v[0] > 0)
+    lam = C / master.freq_hz
+    code = master.code_m + shift[:, None]
+    phase = master.phase_cyc + shift[:, None] / lam
+    ep = StationEpoch(VRS_MARKER_NAME, master.t_gpst, master.sats, code, phase, master.lli.copy(),
+                      master.cnr_dbhz, master.freq_hz, master.codes)
+    return ep.subset(use)
+
+
+def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress=None) -> VrsResult:
+    """Solve the network epoch by epoch and synthesise the VRS at the point."""
+    t_wall = time.perf_counter()
+    point = np.asarray(point_ecef_m, float).reshape(1, 3)
+    stations = {s.name: s.xyz_m for s in inp.stations}
+    if master is not None and master not in stations:
+        raise PostprocessError(f"--master {master}: not one of the stations ({', '.join(stations)})")
+    net = NetworkSolver(stations, master=master)
+    times, rows = align_epochs(inp.stations)
+    by_name = {s.name: s for s in inp.stations}
+    summaries = {s.name: BaselineSummary(s.name, s.length_m / 1e3) for s in net.solvers.values()}
+    epochs: list[StationEpoch] = []
+    modes: list[str] = []
+    n_corr: list[int] = []
+    masters: Counter = Counter()
+    prev_master = None
+    prev_corrected: set[str] = set()
+    skipped = 0
+    misclosures = 0
+    for e, t in enumerate(times):
+        eps = {}
+        for name, r in rows.items():
+            if r[e] >= 0:
+                eps[name] = from_obsdata(by_name[name].obs, int(r[e]), name)
+        ne = net.update(eps, inp.nav)
+        misclosures += ne.misclosures
+        for solver in net.solvers.values():
+            res = ne.baselines[solver.name]
+            bs = summaries[solver.name]
+            if res is None:
+                continue
+            bs.epochs += 1
+            bs.fixed_share_sum += res.fixed_fraction
+            bs.last_fixed_share = res.fixed_fraction
+            if bs.first_epoch_t is None:
+                bs.first_epoch_t = float(t)
+            if bs.first_fix_t is None and res.fixed_fraction >= BASELINE_FIXED_SHARE:
+                bs.first_fix_t = float(t)
+        clocks = dict(getattr(ne, "clocks", None) or _station_clocks(net))
+        # synthesize() needs at least one baseline solution this epoch (it indexes the network's satellite
+        # columns); without one the epoch can only be single-base
+        vrs = synthesize(ne, eps, point, inp.nav, clocks) if len(ne.sats) else None
+        have = [n for n in eps if len(eps[n].sats)]
+        if not have:
+            skipped += 1
+            continue
+        if vrs is not None:
+            vmaster = vrs.master[0]
+            corrected = set(map(str, vrs.sats[vrs.corrected[0]]))
+        else:
+            vmaster = min(have, key=lambda n: float(np.linalg.norm(stations[n] - point[0])))
+            corrected = set()
+        if vrs is not None and len(corrected) >= MIN_CORRECTED_SATELLITES:
+            ep = vrs.station_epoch(0, VRS_MARKER_NAME)
+            keep = np.isin(ep.sats, list(corrected))
+            ep = ep.subset(keep)
+            mode = "network"
+        else:
+            ep = single_base_epoch(eps[vmaster], stations[vmaster], point, inp.nav, clocks.get(vmaster, 0.0))
+            corrected = set()
+            mode = "single-base"
+        ep.lli = ep.lli.copy()
+        if prev_master is not None and vmaster != prev_master:
+            ep.lli |= LLI_LOSS_OF_LOCK  # another master: other receiver clock and ambiguities
+        else:
+            newly = np.array([str(s) in corrected and str(s) not in prev_corrected for s in ep.sats], bool)
+            if prev_master is not None and newly.any():
+                ep.lli[newly] |= LLI_LOSS_OF_LOCK
+            lost = np.array([str(s) in prev_corrected and str(s) not in corrected for s in ep.sats], bool)
+            if lost.any():
+                ep.lli[lost] |= LLI_LOSS_OF_LOCK
+        if not len(ep.sats):
+            skipped += 1
+            continue
+        prev_master, prev_corrected = vmaster, corrected
+        masters[vmaster] += 1
+        epochs.append(ep)
+        modes.append(mode)
+        n_corr.append(len(corrected))
+        if progress is not None:
+            progress(e + 1, len(times))
+    return VrsResult(point_ecef_m=point[0], stations=inp.stations, excluded=inp.excluded, master=net.master,
+                     vrs_masters=masters, epochs=epochs, epoch_mode=modes, corrected_sats=n_corr,
+                     times_processed=len(times), skipped_epochs=skipped, baselines=summaries,
+                     misclosures=misclosures, seconds_wall=time.perf_counter() - t_wall)
+
+
+# --------------------------------------------------------------------------------------------
+# output
+
+
+def to_obsdata(result: VrsResult, marker_name: str = VRS_MARKER_NAME) -> ObsData:
+    """The VRS epochs as RINEX 3.04 observations (code, phase, C/N0 on each signal used)."""
+    eps = result.epochs
+    if not eps:
+        raise PostprocessError("no VRS epoch to write: no epoch had a master station with satellites above the "
+                               "point")
+    sats = sorted({str(s) for ep in eps for s in ep.sats}, key=lambda s: (s[0], s[1:]))
+    codes: dict[str, list[str]] = {}
+    for ep in eps:
+        for s, pair in zip(ep.sats, ep.codes):
+            for rc in pair:
+                if rc and rc not in codes.setdefault(str(s)[0], []):
+                    codes[str(s)[0]].append(rc)
+    obs_types = {sys_: [f"{kind}{rc}" for rc in sorted(rcs, key=lambda c: (c[0], c)) for kind in "CLS"]
+                 for sys_, rcs in sorted(codes.items())}
+    lat, lon, h = ecef_to_geodetic(result.point_ecef_m[None])[0]
+    used = ", ".join(s.name for s in result.stations)
+    masters = ", ".join(f"{m} ({n} epochs)" for m, n in result.vrs_masters.most_common())
+    comments = [
+        "virtual reference station (VRS) synthesised by augnet",
+        f"point lat {math.degrees(lat):.8f} lon {math.degrees(lon):.8f} h {h:.3f} m",
+        f"stations: {used}"[:60],
+        f"network master {result.master}; VRS master {masters}"[:60],
+        f"network-corrected epochs {result.network_epochs} of {len(eps)}; the rest"[:60],
+        "single-base (geometric shift only, no atmosphere corr.)",
+        "receiver clock and ambiguities are the VRS master's",
+    ]
+    header = ObsHeader(program=PROGRAM, run_by="augnet", marker_name=marker_name, marker_type="NON_PHYSICAL",
+                       observer="augnet", agency="augnet network RTK", receiver_type="AUGNET VRS",
+                       receiver_version="1", antenna_type="", approx_position_m=tuple(result.point_ecef_m),
+                       obs_types=obs_types, signal_strength_unit="DBHZ", interval_s=result.interval_s(),
+                       time_of_first_obs=eps[0].t_gpst, time_of_last_obs=eps[-1].t_gpst, time_system="GPS",
+                       comments=comments)
+    data = empty_obs(header, [ep.t_gpst for ep in eps], sats)
+    col = {s: j for j, s in enumerate(sats)}
+    for i, ep in enumerate(eps):
+        for k, s in enumerate(ep.sats):
+            j = col[str(s)]
+            for f in range(2):
+                rc = ep.codes[k, f]
+                if not rc:
+                    continue
+                data.obs["C" + rc][i, j] = ep.code_m[k, f]
+                data.obs["L" + rc][i, j] = ep.phase_cyc[k, f]
+                data.lli["L" + rc][i, j] = ep.lli[k, f] & 0x7
+                data.obs["S" + rc][i, j] = ep.cnr_dbhz[k, f]
+    return data
+
+
+def write_vrs(result: VrsResult, path: str | os.PathLike, marker_name: str = VRS_MARKER_NAME) -> Path:
+    path = Path(path)
+    try:
+        write_obs(path, to_obsdata(result, marker_name))
+    except OSError as exc:
+        raise PostprocessError(f"--out {path}: cannot write ({exc})") from None
+    return path
+
+
+def summary_lines(result: VrsResult) -> list[str]:
+    """What was used, what was solved and what was not, in words an operator reads."""
+    lines = []
+    lat, lon, h = ecef_to_geodetic(result.point_ecef_m[None])[0]
+    lines.append(f"point: lat {math.degrees(lat):.7f} lon {math.degrees(lon):.7f} h {h:.2f} m")
+    for s in result.stations:
+        d = np.linalg.norm(s.xyz_m - result.point_ecef_m) / 1e3
+        lines.append(f"station {s.name}: {len(s.obs.times)} epochs in {s.path.name}, {d:.1f} km from the point, "
+                     f"coordinates from {s.source}")
+    for x in result.excluded:
+        lines.append(f"not used: {x}")
+    lines.append(f"network master {result.master}; epochs shared by >= {MIN_STATIONS_PER_EPOCH} stations: "
+                 f"{result.times_processed}; VRS epochs written: {len(result.epochs)}"
+                 + (f" ({result.skipped_epochs} had nothing to write)" if result.skipped_epochs else ""))
+    any_fixed = False
+    for b in result.baselines.values():
+        ttf = b.time_to_first_fix_s
+        if b.epochs == 0:
+            lines.append(f"baseline {b.name} ({b.length_km:.1f} km): never solved (no common epochs with "
+                         "dual-frequency data)")
+            continue
+        any_fixed |= b.first_fix_t is not None
+        fix_txt = (f"first fix after {ttf:.0f} s" if ttf is not None
+                   else f"never reached {BASELINE_FIXED_SHARE:.0%} of its ambiguities fixed")
+        lines.append(f"baseline {b.name} ({b.length_km:.1f} km): {b.epochs} epochs, mean fixed fraction "
+                     f"{b.mean_fixed_fraction:.0%}, last {b.last_fixed_share:.0%}, {fix_txt}")
+    if result.misclosures:
+        lines.append(f"triangle misclosures (satellites voided for an epoch): {result.misclosures}")
+    n = len(result.epochs)
+    net_n = result.network_epochs
+    if n:
+        lines.append(f"network-corrected VRS epochs: {net_n} of {n} ({net_n / n:.0%}), median "
+                     f"{int(np.median([c for c in result.corrected_sats if c] or [0]))} corrected satellites; "
+                     f"single-base epochs: {n - net_n}")
+    if net_n == 0:
+        if any_fixed:
+            lines.append("baselines fixed, but never around the point with enough satellites: corrections are "
+                         "single-base geometric shifts only")
+        else:
+            lines.append("no baseline fixed: corrections are single-base geometric shifts only (the master's "
+                         "ionosphere and troposphere errors reach the rover unreduced)")
+    elif net_n < n:
+        first_net = result.epoch_mode.index("network")
+        lines.append(f"{n - net_n} epochs are single-base geometric shifts ({first_net} before the network first "
+                     "had corrections around the point, the rest later)")
+    lines.append(f"VRS master station(s): " + ", ".join(f"{m} ({k} epochs)" for m, k in result.vrs_masters.most_common()))
+    lines.append(f"processing time {result.seconds_wall:.1f} s")
+    return lines
+
+
+def run_vrs(record: str | os.PathLike, at: str, out: str | os.PathLike, nav=None, coords=None,
+            exclude=(), master: str | None = None, marker_name: str = VRS_MARKER_NAME,
+            progress=None) -> tuple[VrsResult, list[str]]:
+    """The whole post-processing: read, solve, synthesise, write. Returns the result and its summary."""
+    point = parse_point(at)
+    inp = load_network(record, nav=nav, coords=coords, exclude=tuple(exclude))
+    result = process(inp, point, master=master, progress=progress)
+    write_vrs(result, out, marker_name)
+    return result, summary_lines(result)
