@@ -209,16 +209,23 @@ class BaselineSolver:
 
     # --- one epoch -----------------------------------------------------------------------------
 
-    def update(self, ep_a: StationEpoch, ep_b: StationEpoch, nav: NavigationData) -> BaselineEpoch | None:
+    def update(self, ep_a: StationEpoch, ep_b: StationEpoch, nav: NavigationData,
+               geom_a: SatelliteGeometry | None = None, geom_b: SatelliteGeometry | None = None,
+               excluded: set[str] | frozenset[str] = frozenset()) -> BaselineEpoch | None:
+        """One epoch. `geom_a`/`geom_b`: the stations' geometry for all their satellites (the network
+        computes it once per station); `excluded`: satellites the integrity monitor has taken out."""
         cfg = self.cfg
         t = ep_a.t_gpst
         if abs(ep_b.t_gpst - t) > 1e-3:
             raise ValueError(f"{self.name}: epochs not aligned ({ep_a.t_gpst} vs {ep_b.t_gpst})")
-        a, b = _common_dual_frequency(ep_a, ep_b)
+        a, b, ia, ib = _common_dual_frequency(ep_a, ep_b, excluded)
         if a is None:
             return None
-        ga = satellite_geometry(a.sats, t, self.xyz_a, nav, a.code_m[:, 0], self.clock["a"])
-        gb = satellite_geometry(b.sats, t, self.xyz_b, nav, b.code_m[:, 0], self.clock["b"])
+        if geom_a is None:
+            geom_a = satellite_geometry(ep_a.sats, t, self.xyz_a, nav, ep_a.code_m[:, 0], self.clock["a"])
+        if geom_b is None:
+            geom_b = satellite_geometry(ep_b.sats, t, self.xyz_b, nav, ep_b.code_m[:, 0], self.clock["b"])
+        ga, gb = geom_a.subset(ia), geom_b.subset(ib)
         self.clock["a"], self.clock["b"] = ga.clock_s, gb.clock_s
         mask = math.radians(cfg.elevation_mask_deg)
         use = ga.valid & gb.valid & (ga.elevation_rad >= mask) & (gb.elevation_rad >= mask)
@@ -490,13 +497,17 @@ class BaselineSolver:
         return fix.ratio if fix is not None else 0.0
 
 
-def _common_dual_frequency(ep_a: StationEpoch, ep_b: StationEpoch):
-    """The two stations' observations of the satellites both track on both frequencies, same signals."""
+def _common_dual_frequency(ep_a: StationEpoch, ep_b: StationEpoch, excluded=frozenset()):
+    """The two stations' observations of the satellites both track on both frequencies, same signals;
+    with the index of each in its station's epoch."""
     ia = {s: i for i, s in enumerate(ep_a.sats)}
     dual_a = ep_a.dual_frequency()
     dual_b = ep_b.dual_frequency()
     pairs = [(ia[s], j) for j, s in enumerate(ep_b.sats)
-             if s in ia and dual_a[ia[s]] and dual_b[j] and np.array_equal(ep_a.freq_hz[ia[s]], ep_b.freq_hz[j])]
+             if s in ia and s not in excluded and dual_a[ia[s]] and dual_b[j]
+             and np.array_equal(ep_a.freq_hz[ia[s]], ep_b.freq_hz[j])]
     if len(pairs) < 2:
-        return None, None
-    return ep_a.subset([p[0] for p in pairs]), ep_b.subset([p[1] for p in pairs])
+        return None, None, None, None
+    ja = np.array([p[0] for p in pairs])
+    jb = np.array([p[1] for p in pairs])
+    return ep_a.subset(ja), ep_b.subset(jb), ja, jb

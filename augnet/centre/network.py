@@ -20,7 +20,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from augnet.centre.baseline import BaselineConfig, BaselineEpoch, BaselineSolver
+from augnet.centre.integrity import Alarm, IntegrityMonitor
 from augnet.centre.observations import StationEpoch
+from augnet.centre.satellite_geometry import SatelliteGeometry, satellite_geometry
 from augnet.gnss.ephemeris import NavigationData
 from augnet.gnss.geometry import ecef_to_enu
 
@@ -72,6 +74,9 @@ class NetworkEpoch:
     baselines: dict[str, BaselineEpoch | None]
     misclosures: int = 0
     present: list[str] = field(default_factory=list)  # stations with data this epoch
+    clocks: dict[str, float] = field(default_factory=dict)  # receiver clock estimates [s] per station
+    excluded: set[str] = field(default_factory=set)  # satellites the integrity monitor took out
+    alarms: list[Alarm] = field(default_factory=list)  # alarms raised this epoch
 
     def fixed_fraction(self) -> dict[str, float]:
         return {k: (b.fixed_fraction if b is not None else 0.0) for k, b in self.baselines.items()}
@@ -95,18 +100,30 @@ class NetworkSolver:
         m = self.names.index(self.master)
         self.order = [m] + [i for i in range(len(self.names)) if i != m]
         self.en = ecef_to_enu(self.xyz - self.xyz[m], self.xyz[m])[:, :2]
+        self.clocks = {n: 0.0 for n in self.names}
+        self.integrity = IntegrityMonitor(self.names)
 
     def _central_station(self) -> str:
         c = self.xyz.mean(axis=0)
         return self.names[int(np.argmin(np.linalg.norm(self.xyz - c, axis=1)))]
 
     def update(self, epochs: dict[str, StationEpoch], nav: NavigationData) -> NetworkEpoch:
-        present = {n for n, e in epochs.items() if e is not None and len(e.sats)}
+        present = {n for n, e in epochs.items() if e is not None and len(e.sats) and n in self.clocks}
         results: dict[tuple[int, int], BaselineEpoch | None] = {}
         t = next(iter(epochs[n].t_gpst for n in present)) if present else float("nan")
+        geom: dict[str, SatelliteGeometry] = {}
+        pos = {n: i for i, n in enumerate(self.names)}
+        for n in present:
+            ep = epochs[n]
+            geom[n] = satellite_geometry(ep.sats, ep.t_gpst, self.xyz[pos[n]], nav, ep.code_m[:, 0], self.clocks[n])
+            self.clocks[n] = geom[n].clock_s
+        excluded = self.integrity.observe(t, {n: epochs[n] for n in present}, geom) if present else set()
         for (i, j), solver in self.solvers.items():
             a, b = self.names[i], self.names[j]
-            results[(i, j)] = solver.update(epochs[a], epochs[b], nav) if a in present and b in present else None
+            if a in present and b in present:
+                results[(i, j)] = solver.update(epochs[a], epochs[b], nav, geom[a], geom[b], excluded)
+            else:
+                results[(i, j)] = None
         misclosures = self._check_closures(results)
         refs = self._network_refs(results)
         sats = np.array(sorted({str(s) for r in results.values() if r is not None for s in r.sats}))
@@ -141,7 +158,8 @@ class NetworkSolver:
             t_gpst=t, master=self.master, stations=[self.names[i] for i in rows], station_en_m=self.en[rows],
             station_xyz_m=self.xyz[rows], refs=refs, sats=sats, dd_iono_m=iono[rows], dd_trop_m=trop[rows],
             baselines={self.solvers[e].name: r for e, r in results.items()}, misclosures=misclosures,
-            present=sorted(present))
+            present=sorted(present), clocks=dict(self.clocks), excluded=set(excluded),
+            alarms=self.integrity.drain())
 
     def _network_refs(self, results) -> dict[str, str]:
         """Per system, the satellite fixed on the most baselines (ties: the first baseline's reference)."""

@@ -86,7 +86,11 @@ def geometry_many(sats, t_tag: float, clock_s: float, points_ecef_m: np.ndarray,
 
 def synthesize(net: NetworkEpoch, station_epochs: dict[str, StationEpoch], points_ecef_m,
                nav: NavigationData, clocks: dict[str, float] | None = None) -> VrsEpoch | None:
-    """VRS observations for each point, from the network's residuals and the master stations' data."""
+    """VRS observations for each point, from the network's residuals and the master stations' data.
+
+    Receiver clocks of the masters default to the network's estimates; satellites the integrity monitor
+    excluded are left out of every VRS."""
+    clocks = net.clocks if clocks is None else clocks
     pts = np.atleast_2d(np.asarray(points_ecef_m, float))
     T = len(pts)
     present = [i for i, s in enumerate(net.stations) if station_epochs.get(s) is not None]
@@ -96,7 +100,8 @@ def synthesize(net: NetworkEpoch, station_epochs: dict[str, StationEpoch], point
     d = np.linalg.norm(pts[:, None, :] - xyz[None, present, :], axis=2)
     master_idx = np.array(present)[np.argmin(d, axis=1)]  # (T,) row in net.stations
     # the union of satellites the masters observe, in a fixed order
-    sat_set = sorted({str(s) for i in set(master_idx.tolist()) for s in station_epochs[net.stations[i]].sats})
+    sat_set = sorted({str(s) for i in set(master_idx.tolist()) for s in station_epochs[net.stations[i]].sats}
+                     - set(net.excluded))
     sats = np.array(sat_set)
     S = len(sats)
     code = np.full((T, S, 2), np.nan)
@@ -135,9 +140,10 @@ def synthesize(net: NetworkEpoch, station_epochs: dict[str, StationEpoch], point
     for mrow in sorted(set(master_idx.tolist())):
         name = net.stations[mrow]
         ep = station_epochs[name]
+        ep = ep.subset(~np.isin(ep.sats, list(net.excluded))) if net.excluded else ep
         who = np.flatnonzero(master_idx == mrow)
         col = np.searchsorted(sats, ep.sats)
-        clk = (clocks or {}).get(name, 0.0)
+        clk = clocks.get(name, 0.0)
         g_m, trop_m, _ = geometry_many(ep.sats, ep.t_gpst, clk, xyz[mrow], nav)
         g_v, trop_v, el_v = geometry_many(ep.sats, ep.t_gpst, clk, pts[who], nav)
         # corrections between point and this master: (point - net master) - (this master - net master)
