@@ -41,11 +41,11 @@ def test_stations_stream_to_the_project_caster():
     with CasterThread(CasterConfig(port=0, allow_unknown_sources=True), use_uvloop=False) as ct:
         async def main():
             ready = {}
-            task = asyncio.ensure_future(live.run_stations(_short(), "127.0.0.1", ct.port, speed=4.0,
+            task = asyncio.ensure_future(live.run_stations(_short(8.0), "127.0.0.1", ct.port, speed=2.0,
                                                            on_ready=ready.update))
             while not ready or not all(c.connected.is_set() for c in ready.values()):
                 await asyncio.sleep(0.05)
-            data = await _read_mount(ct.port, "B", 1.2)
+            data = await _read_mount(ct.port, "B", 2.0)
             stats = await task
             return data, stats
 
