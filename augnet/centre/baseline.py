@@ -404,8 +404,8 @@ class BaselineSolver:
         except np.linalg.LinAlgError:
             return
         self.x = self.x + K @ innov
-        IKH = np.eye(len(self.x)) - K @ H
-        self.P = IKH @ self.P @ IKH.T + K @ R @ K.T  # Joseph form keeps P symmetric positive definite
+        self.P = self.P - K @ PHt.T
+        self.P = 0.5 * (self.P + self.P.T)
 
     def _dd_ambiguity_rows(self, sats, ks, ref_k, fq) -> np.ndarray:
         D = np.zeros((len(ks), len(self.x)))
@@ -470,16 +470,29 @@ class BaselineSolver:
             return 0.0
         a_hat = D @ self.x
         Q = D @ self.P @ D.T
+        # Wide-lane pre-transform: per satellite with both frequencies in the search, (N1, N2) -> (N1 - N2, N1),
+        # an integer unimodular map. The wide lane is far better determined than N1 and N2, which are
+        # ionosphere-limited; starting from it leaves LAMBDA's reduction a fraction of the permutations.
+        T = np.eye(len(cands))
+        where = {kf: i for i, kf in enumerate(cands)}
+        for i, (k, fq) in enumerate(cands):
+            j = where.get((k, 1))
+            if fq == 0 and j is not None:
+                T[j, :] = 0.0
+                T[j, i], T[j, j] = 1.0, -1.0  # row of N2 becomes N1 - N2
+        b_hat = T @ a_hat
+        Qb = T @ Q @ T.T
         try:
-            fix = partial_fix(a_hat, Q, cfg.fix_min_success_rate, cfg.fix_ratio, cfg.fix_min_count)
+            fix = partial_fix(b_hat, Qb, cfg.fix_min_success_rate, cfg.fix_ratio, cfg.fix_min_count)
         except AmbiguityError:
             fix = None
         pinned_val: dict[tuple[int, int], int] = {}
         if fix is not None:
-            S = fix.Zs.T @ Q @ fix.Zs
-            K = np.linalg.solve(S, fix.Zs.T @ Q).T
-            a_cond = a_hat - K @ (fix.Zs.T @ a_hat - fix.z_fixed)
-            sig = np.sqrt(np.clip(np.diag(Q - K @ fix.Zs.T @ Q), 0.0, None))
+            Zs = T.T @ fix.Zs  # the fixed combinations in terms of the original (N1, N2)
+            S = Zs.T @ Q @ Zs
+            K = np.linalg.solve(S, Zs.T @ Q).T
+            a_cond = a_hat - K @ (Zs.T @ a_hat - fix.z_fixed)
+            sig = np.sqrt(np.clip(np.diag(Q - K @ Zs.T @ Q), 0.0, None))
             for i, kf in enumerate(cands):
                 val = int(round(a_cond[i]))
                 if sig[i] <= cfg.pinned_sigma_cyc and abs(a_cond[i] - val) < 3 * cfg.pinned_sigma_cyc:
