@@ -29,7 +29,7 @@ from augnet.gnss import time as gtime
 from augnet.gnss.constants import (GM_BDS_M3_S2, GM_GAL_M3_S2, GM_GPS_M3_S2, OMEGA_E_BDS_RAD_S,
                                    OMEGA_E_GAL_RAD_S, OMEGA_E_GPS_RAD_S, WGS84_A_M)
 from augnet.gnss.ephemeris import Ephemeris
-from stations.ephemeris_messages import quantise
+from augnet.gnss.rtcm.ephemeris import quantise
 
 J2 = 1.08262668e-3  # Earth's second zonal harmonic (EGM96), for nominal nodal regression
 

@@ -15,13 +15,13 @@ from pathlib import Path
 
 import numpy as np
 
-from augnet.gnss import time as gtime
 from augnet.gnss.rtcm.batch import encode_msm_batch
-from augnet.gnss.rtcm.codec import RtcmMessage, encode_frame, text_fields
+from augnet.gnss.rtcm.codec import RtcmMessage, encode_frame
 from augnet.gnss.rtcm.layouts import MSM_MAX_CELLS
 from augnet.gnss.rtcm.observables import Observables, observables_to_msm_list
 from augnet.gnss.signals import by_rinex
-from stations.ephemeris_messages import ephemeris_message
+from augnet.gnss.rtcm import station as station_msgs
+from augnet.gnss.rtcm.ephemeris import ephemeris_message
 from stations.world import EpochBlock, World
 
 MSM_LEVEL = 7
@@ -32,27 +32,14 @@ SYSTEM_ORDER = ("G", "E", "C")
 
 
 def arp_message(station_id: int, ecef_m) -> RtcmMessage:
-    """1005: stationary antenna reference point, real station, GPS/Galileo (BDS signalled by MSM)."""
-    x, y, z = (float(v) for v in ecef_m)
-    return RtcmMessage(1005, dict(DF002=1005, DF003=station_id, DF021=0, DF022=1, DF023=0, DF024=1,
-                                  DF141=0, DF025=x, DF142=1, DF001_1=0, DF026=y, DF364=0, DF027=z))
+    return station_msgs.arp_message(station_id, ecef_m)
 
 
 def descriptor_message(station_id: int, serial: str) -> RtcmMessage:
-    """1033: antenna and receiver descriptors (what RINEX headers and casters show)."""
-    f: dict[str, object] = dict(DF002=1033, DF003=station_id, DF031=0)
-    f.update(text_fields("DF030", "DF029", ANTENNA_DESCRIPTOR))
-    f.update(text_fields("DF033", "DF032", serial))
-    f.update(text_fields("DF228", "DF227", RECEIVER_DESCRIPTOR))
-    f.update(text_fields("DF230", "DF229", FIRMWARE))
-    f.update(text_fields("DF232", "DF231", serial))
-    return RtcmMessage(1033, f)
+    return station_msgs.descriptor_message(station_id, serial, ANTENNA_DESCRIPTOR, RECEIVER_DESCRIPTOR, FIRMWARE)
 
 
-def msm_epoch_ms(system: str, t_gpst: float) -> int:
-    """The MSM epoch field: time of week [ms] in the system's own time (BDT for BeiDou)."""
-    _, tow = gtime.system_week_tow(system, t_gpst)
-    return int(round(float(tow) * 1000.0)) % (7 * 86_400_000)
+msm_epoch_ms = station_msgs.msm_epoch_ms
 
 
 class RtcmStreams:

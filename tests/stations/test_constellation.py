@@ -15,7 +15,7 @@ from augnet.gnss.ephemeris import NavigationData, satellite_state
 from augnet.gnss.geometry import ecef_to_geodetic
 from augnet.gnss.rtcm.codec import encode_frame
 from stations.constellation import TOE_INTERVAL_S, broadcast_ephemerides, nominal_orbits
-from stations.ephemeris_messages import SEMICIRCLE_RAD, ephemeris_message, quantise
+from augnet.gnss.rtcm.ephemeris import SEMICIRCLE_RAD, ephemeris_message, quantise
 
 T0 = gtime.from_calendar(2026, 3, 10, 0)
 

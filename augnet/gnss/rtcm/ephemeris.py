@@ -1,12 +1,10 @@
-"""Broadcast ephemerides <-> RTCM 1019 (GPS), 1042 (BeiDou), 1046 (Galileo I/NAV) field values.
+"""Broadcast ephemerides <-> RTCM 1019 (GPS), 1042 (BeiDou), 1045/1046 (Galileo F/NAV, I/NAV).
 
 One table per message maps each `Ephemeris` attribute to its data field and unit conversion
-(RINEX keeps radians, RTCM and the ICDs semicircles).  The same table quantises a simulated
+(RINEX keeps radians, RTCM and the ICDs semicircles). The same table quantises a simulated
 ephemeris to the broadcast resolution, so what the simulator writes to nav.rnx is exactly what a
-receiver decodes from the RTCM stream.
-
-(The RTCM package does not yet offer Ephemeris <-> message conversion; when it does, this module
-should defer to it.)
+receiver decodes from the RTCM stream, and turns a decoded message back into an `Ephemeris`
+(`message_ephemeris`), with its truncated week resolved against a reference time.
 """
 
 from __future__ import annotations
@@ -49,6 +47,7 @@ _ORBIT_GAL = (
 )
 ORBIT_FIELDS = {"G": _ORBIT_GPS, "C": _ORBIT_BDS, "E": _ORBIT_GAL}
 MESSAGE_TYPE = {"G": 1019, "C": 1042, "E": 1046}
+GPS_WEEK_ROLLOVER = 1024  # DF076 holds the GPS week modulo 1024
 
 
 def _ura_index(accuracy_m: float) -> int:
@@ -126,3 +125,51 @@ def ephemeris_message(eph: Ephemeris) -> RtcmMessage:
 def wrap_angle(rad: float) -> float:
     """An angle in [-pi, pi): semicircle fields are signed and hold [-1, 1)."""
     return math.remainder(rad, 2 * math.pi)
+
+
+# Galileo data-source bits of a decoded message (RINEX 3.04 Table A8): I/NAV E1-B with the E5b/E1 clock,
+# F/NAV E5a with the E5a/E1 clock.
+GAL_DATA_SOURCES = {1046: 0b10_0000_0101, 1045: 0b01_0000_0010}
+
+
+def _resolve_week(week_mod: int, modulus: int, t_ref_week: int) -> int:
+    """The full week nearest a reference week, given the week modulo `modulus`."""
+    base = t_ref_week - (t_ref_week % modulus) + week_mod
+    candidates = (base - modulus, base, base + modulus)
+    return min(candidates, key=lambda w: abs(w - t_ref_week))
+
+
+def message_ephemeris(msg: RtcmMessage, t_ref_gpst: float) -> Ephemeris:
+    """An `Ephemeris` from a decoded 1019 / 1042 / 1045 / 1046 message.
+
+    `t_ref_gpst` (any time within half a roll-over period, e.g. now or the stream's epoch) resolves the
+    truncated week numbers (GPS: 10 bits; Galileo: 12 bits; BDS: 13 bits).
+    """
+    from augnet.gnss import time as gtime
+
+    f = msg.fields
+    t = msg.msg_type
+    system = {1019: "G", 1042: "C", 1045: "E", 1046: "E"}.get(t)
+    if system is None:
+        raise ValueError(f"message {t} is not an ephemeris")
+    orbit = ORBIT_FIELDS[system]
+    if t == 1045:  # F/NAV: same orbit fields; BGD E5b/E1 absent
+        orbit = tuple(item for item in orbit if item[0] != "bgd_e5b_e1")
+    values = {attr: float(f[df]) / factor for attr, df, factor in orbit}
+    ref_week, _ = gtime.system_week_tow(system, t_ref_gpst)
+    ref_week = int(ref_week)
+    if system == "G":
+        week = _resolve_week(int(f["DF076"]), GPS_WEEK_ROLLOVER, ref_week)
+        extra = dict(prn=int(f["DF009"]), iode=int(f["DF071"]), iodc=int(f["DF085"]), health=int(f["DF102"]),
+                     codes_on_l2=int(f["DF078"]), l2p_data_flag=int(f["DF103"]),
+                     fit_interval_h=4.0 if int(f["DF137"]) == 0 else 6.0)
+    elif system == "C":
+        week = _resolve_week(int(f["DF489"]), 8192, ref_week)
+        extra = dict(prn=int(f["DF488"]), iode=int(f["DF492"]), iodc=int(f["DF497"]), health=int(f["DF515"]))
+    else:
+        week = _resolve_week(int(f["DF289"]), 4096, ref_week)
+        # signal health and data validity bits: any set one makes the set unusable
+        health = (int(f.get("DF287", 0)) << 4) | (int(f.get("DF288", 0)) << 3) | (int(f.get("DF314", 0)) << 1) \
+            | int(f.get("DF315", 0))
+        extra = dict(prn=int(f["DF252"]), iode=int(f["DF290"]), data_sources=GAL_DATA_SOURCES[t], health=health)
+    return Ephemeris(system=system, week=week, **values, **extra)
