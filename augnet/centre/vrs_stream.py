@@ -1,0 +1,198 @@
+"""RTCM 3 streams of virtual reference stations: one per client (train), encoded for all of them at once.
+
+Per epoch and client, in this order (what RTKLIB and commercial rovers expect of a VRS, network-rtk.md):
+  * 1006 (antenna reference point of the VRS, height 0) when the point is new or moved, and every
+    `STATION_INTERVAL_S`; 1033 (descriptors) every `STATION_INTERVAL_S`;
+  * broadcast ephemerides (1019 / 1046 / 1042) of the satellites in the VRS every `EPHEMERIS_INTERVAL_S`
+    and whenever a satellite's set changes;
+  * MSM7 (or MSM4) per system, the multiple-message bit set on all but the epoch's last.
+
+The MSM of one system is encoded for every client in one batch (`encode_msm_batch`). Lock times and
+whole-cycle phase offsets (MSM holds the phase within +-1171 m of the code) are kept per client, satellite
+and signal; a change of master station changes the VRS ambiguities, so it restarts every lock.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from augnet.centre.vrs import VrsEpoch
+from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
+from augnet.gnss.ephemeris import NavigationData
+from augnet.gnss.rtcm import encode_frame
+from augnet.gnss.rtcm.batch import encode_msm_batch
+from augnet.gnss.rtcm.ephemeris import ephemeris_message
+from augnet.gnss.rtcm.layouts import MSM_MAX_CELLS
+from augnet.gnss.rtcm.observables import phase_offset_cycles
+from augnet.gnss.rtcm.station import arp_message, descriptor_message, msm_epoch_ms
+from augnet.gnss.signals import by_rinex
+
+STATION_INTERVAL_S = 10.0
+EPHEMERIS_INTERVAL_S = 60.0
+SYSTEM_ORDER = ("G", "E", "C")
+VRS_ANTENNA = "ADVNULLANTENNA"  # a VRS has no antenna: RTKLIB and IGS use this name for "no calibration"
+VRS_RECEIVER = "AUGNET VRS"
+FIRMWARE = "1"
+
+
+@dataclass
+class Client:
+    """What the stream remembers about one client."""
+
+    station_id: int
+    point: np.ndarray
+    row: int  # this client's row in the lock-state arrays
+    master: str = ""
+    last_arp: float = -np.inf
+    last_eph: float = -np.inf
+    eph_sent: dict = field(default_factory=dict)  # sat -> ephemeris row sent
+    moved: bool = True
+
+
+class VrsStreamEncoder:
+    def __init__(self, msm_level: int = 7):
+        self.level = msm_level
+        self.clients: dict[str, Client] = {}
+        self._free_rows: list[int] = []
+        # lock state, dense over (client row, satellite-signal key): start time (NaN = not locked) and the
+        # whole-cycle phase offset taken at lock start
+        self._keys: dict[tuple[str, str], int] = {}
+        self._lock_t0 = np.full((0, 0), np.nan)
+        self._offset = np.zeros((0, 0))
+
+    def _grow(self, rows: int, keys: int) -> None:
+        r0, k0 = self._lock_t0.shape
+        if rows <= r0 and keys <= k0:
+            return
+        r1, k1 = max(rows, 2 * r0, 16), max(keys, 2 * k0, 64)
+        t0 = np.full((r1, k1), np.nan)
+        off = np.zeros((r1, k1))
+        t0[:r0, :k0] = self._lock_t0
+        off[:r0, :k0] = self._offset
+        self._lock_t0, self._offset = t0, off
+
+    def add(self, client_id: str, station_id: int, point_ecef) -> None:
+        row = self._free_rows.pop() if self._free_rows else len(self.clients)
+        self._grow(row + 1, len(self._keys))
+        self._lock_t0[row] = np.nan
+        self.clients[client_id] = Client(station_id, np.asarray(point_ecef, float), row)
+
+    def move(self, client_id: str, point_ecef) -> None:
+        c = self.clients[client_id]
+        c.point = np.asarray(point_ecef, float)
+        c.moved = True
+
+    def remove(self, client_id: str) -> None:
+        c = self.clients.pop(client_id, None)
+        if c is not None:
+            self._free_rows.append(c.row)
+
+    def _key(self, sat: str, code: str) -> int:
+        k = self._keys.get((sat, code))
+        if k is None:
+            k = self._keys[(sat, code)] = len(self._keys)
+        return k
+
+    def encode(self, ids: list[str], vrs: VrsEpoch, nav: NavigationData) -> dict[str, bytes]:
+        """The epoch's RTCM bytes for each client in `ids` (rows of `vrs` in the same order)."""
+        t = vrs.t_gpst
+        out = {cid: bytearray() for cid in ids}
+        # station and ephemeris messages: per client, only when due (a few per client per minute)
+        eph_rows = nav.select(list(vrs.sats), t)
+        for i, cid in enumerate(ids):
+            c = self.clients[cid]
+            if c.master and c.master != vrs.master[i]:
+                self._lock_t0[c.row] = np.nan  # new master, new ambiguities: every lock restarts
+            c.master = vrs.master[i]
+            if c.moved or t - c.last_arp >= STATION_INTERVAL_S:
+                out[cid] += encode_frame(arp_message(c.station_id, c.point, antenna_height_m=0.0))
+                out[cid] += encode_frame(descriptor_message(c.station_id, f"VRS{c.station_id}", VRS_ANTENNA,
+                                                            VRS_RECEIVER, FIRMWARE))
+                c.last_arp = t
+                c.moved = False
+            have = np.isfinite(vrs.code_m[i]).any(axis=1)
+            periodic = t - c.last_eph >= EPHEMERIS_INTERVAL_S
+            for k in np.flatnonzero(have):
+                sat = str(vrs.sats[k])
+                row = int(eph_rows[k])
+                if row < 0 or sat[0] not in "GEC":
+                    continue
+                if periodic or c.eph_sent.get(sat) != row:
+                    try:
+                        out[cid] += encode_frame(ephemeris_message(nav.table.records[row]))
+                    except (ValueError, KeyError):
+                        continue
+                    c.eph_sent[sat] = row
+            if periodic:
+                c.last_eph = t
+        # MSM per system, batched over clients
+        systems = [s for s in SYSTEM_ORDER if any(str(x).startswith(s) for x in vrs.sats)]
+        frames_per_system = []
+        for system in systems:
+            frames_per_system.append(self._msm(system, ids, vrs))
+        last = len(frames_per_system) - 1
+        for j, batch in enumerate(frames_per_system):
+            for i, cid in enumerate(ids):
+                out[cid] += batch[j == last][i]
+        return {cid: bytes(b) for cid, b in out.items()}
+
+    def _msm(self, system: str, ids: list[str], vrs: VrsEpoch):
+        """Two encodings of this system's MSM per client: with the multiple-message bit, and without."""
+        cols = np.flatnonzero(np.char.startswith(vrs.sats.astype(str), system))
+        sats = vrs.sats[cols]
+        prn = np.array([int(s[1:]) for s in sats])
+        codes = [c for c in dict.fromkeys(vrs.codes[cols].ravel().tolist()) if c]
+        sig_ids = np.array([by_rinex(system, c).msm_id for c in codes])
+        order = np.argsort(sig_ids)
+        codes = [codes[i] for i in order]
+        sig_ids = sig_ids[order]
+        T = len(ids)
+        nsat, nsig = len(cols), len(codes)
+        pr = np.full((T, nsat, nsig), np.nan)
+        cp = np.full((T, nsat, nsig), np.nan)
+        cnr = np.full((T, nsat, nsig), np.nan)
+        lock_ms = np.zeros((T, nsat, nsig))
+        t = vrs.t_gpst
+        rows_c = np.array([self.clients[c].row for c in ids], dtype=int)
+        for slot in range(2):
+            code_of = vrs.codes[cols, slot]
+            for j, c in enumerate(codes):
+                rows = np.flatnonzero(code_of == c)
+                if rows.size == 0:
+                    continue
+                pr[:, rows, j] = vrs.code_m[:, cols[rows], slot]
+                cp[:, rows, j] = vrs.phase_cyc[:, cols[rows], slot]
+                cnr[:, rows, j] = vrs.cnr_dbhz[:, cols[rows], slot]
+                keys = np.array([self._key(str(sats[k]), c) for k in rows])
+                self._grow(rows_c.max(initial=0) + 1, len(self._keys))
+                t0 = self._lock_t0[np.ix_(rows_c, keys)]
+                off = self._offset[np.ix_(rows_c, keys)]
+                have = np.isfinite(cp[:, rows, j])
+                restart = have & (np.isnan(t0) | ((vrs.lli[:, cols[rows], slot] & 1) != 0))
+                lam = SPEED_OF_LIGHT_M_S / vrs.freq_hz[cols[rows], slot]
+                new_off = phase_offset_cycles(pr[:, rows, j], cp[:, rows, j], lam[None, :])
+                t0 = np.where(restart, t, np.where(have, t0, np.nan))
+                off = np.where(restart, new_off, off)
+                self._lock_t0[np.ix_(rows_c, keys)] = t0
+                self._offset[np.ix_(rows_c, keys)] = off
+                cp[:, rows, j] -= off
+                lock_ms[:, rows, j] = np.where(have, (t - t0) * 1000.0, 0.0)
+        station_ids = np.array([self.clients[c].station_id for c in ids])
+        epoch = msm_epoch_ms(system, t)
+        per_client = nsat * nsig
+        if per_client > MSM_MAX_CELLS:  # more cells than one MSM holds: split the satellites
+            groups = np.array_split(np.arange(nsat), int(np.ceil(per_client / MSM_MAX_CELLS)))
+        else:
+            groups = [np.arange(nsat)]
+        encoded = {}
+        for final in (False, True):
+            parts = []
+            for g_i, g in enumerate(groups):
+                multiple = 0 if (final and g_i == len(groups) - 1) else 1
+                parts.append(encode_msm_batch(system, self.level, prn[g], sig_ids, station_ids, epoch,
+                                              pr[:, g], cp[:, g], None, cnr[:, g], lock_ms[:, g],
+                                              multiple=multiple))
+            encoded[final] = [b"".join(p[i] for p in parts) for i in range(T)]
+        return encoded
