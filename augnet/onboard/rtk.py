@@ -27,13 +27,27 @@ import numpy as np
 from threadpoolctl import ThreadpoolController
 
 from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
-from augnet.gnss.ambiguity import AmbiguityError, PartialFix, partial_fix
+from augnet.gnss.ambiguity import (
+    AmbiguityError,
+    PartialFix,
+    bootstrap_success_rate,
+    ldl,
+    reduce,
+    search,
+)
 from augnet.gnss.ephemeris import NavigationData
 from augnet.gnss.geometry import azimuth_elevation, ecef_to_geodetic
 from augnet.onboard.atmosphere import saastamoinen_m
 from augnet.onboard.cycleslip import SlipDetector
 from augnet.onboard.observations import EpochObs
-from augnet.onboard.spp import SppOptions, SppResult, geometric_range, satellite_positions, solve_spp
+from augnet.onboard.spp import (
+    SppOptions,
+    SppResult,
+    chi2_quantile,
+    geometric_range,
+    satellite_positions,
+    solve_spp,
+)
 
 
 class Status(IntEnum):
@@ -89,6 +103,18 @@ RELINEARISE_M = 0.05
 # Fixed solutions failing the residual check are retried this many times, each without the worst
 # satellite (RTKLIB-EX and commercial engines exclude satellites the same way).
 AR_EXCLUSION_RETRIES = 3
+# A fixed solution must have a 3-D position sigma below this [m] (a fix that only pins a few
+# ambiguity combinations leaves decimetres: it is still a float solution).
+MAX_FIXED_POSITION_SIGMA_M = 0.05
+# Partial ambiguity resolution tries at most this many nested subsets per search: each integer
+# search costs up to ~0.5 s in Python on a poor float solution, and a rover must keep up with 1 Hz.
+MAX_PARTIAL_FIX_TRIES = 8
+# False-alarm probability of the chi-square test that a float ambiguity vector is consistent with
+# its covariance (the bootstrapped solution's norm), before an integer search is spent on it.
+FLOAT_CONSISTENCY_FALSE_ALARM = 1e-6
+# ... and the RMS of the conditional fractional parts [cycles] beyond which it is called biased: with a
+# success rate >= 0.999 every conditional sigma is below ~0.15 cycles, so 0.2 is well outside noise.
+BIASED_FLOAT_RMS_CYC = 0.2
 # The float position may differ from the epoch's SPP by the SPP's error; beyond this [m] plus five
 # SPP sigmas the filter has gone wrong.
 SPP_CONSISTENCY_M = 30.0
@@ -600,7 +626,13 @@ class RtkFilter:
             result = self._try_fix(rows, sd_phase, los, wl, x_lin)
             if isinstance(result, str):
                 message = result
-                break
+                if not result.startswith("float: no ambiguity subset"):
+                    break
+                # nothing passed: the satellite fitting the float solution worst is the likely
+                # culprit (multipath, an undetected slip); leave it out and search again
+                res = self._phase_residuals(rows, sd_phase, los, wl, x_lin, self.x)
+                rows = [r for j, r in enumerate(rows) if j != int(np.argmax(np.abs(res)))]
+                continue
             fix, Hc, x_fix, P_fix, res = result
             worst = int(np.argmax(np.abs(res)))
             if abs(res[worst]) <= MAX_FIXED_PHASE_RESIDUAL_M:
@@ -623,8 +655,7 @@ class RtkFilter:
         a_dd = D @ self.x[idx]
         Q_dd = D @ self.P[np.ix_(idx, idx)] @ D.T
         try:
-            fix = partial_fix(a_dd, Q_dd, min_success_rate=opt.min_success_rate,
-                              ratio_threshold=opt.ratio_threshold, min_count=opt.min_fix_ambiguities)
+            fix = bounded_partial_fix(a_dd, Q_dd, opt.min_success_rate, opt.ratio_threshold, opt.min_fix_ambiguities)
         except AmbiguityError as exc:
             return f"float: ambiguity covariance unusable ({exc})"
         if fix is None:
@@ -639,13 +670,22 @@ class RtkFilter:
             return "float: fixed-ambiguity constraint singular"
         x_fix = self.x - K @ (Hc @ self.x - fix.z_fixed)
         P_fix = self.P - K @ Hc @ self.P
-        # DD phase residuals of the fixed state, formed at the linearisation point
-        dx = x_fix[:3] - x_lin
+        # A partial fix of a few combinations (wide-lane-like) can pass its tests and still leave the
+        # position at float precision: that is not an RTK fix and is not reported as one.
+        sigma = math.sqrt(max(float(np.trace(P_fix[:3, :3])), 0.0))
+        if sigma > MAX_FIXED_POSITION_SIGMA_M:
+            return f"float: fixed subset ({fix.count}) leaves position sigma {sigma * 100:.0f} cm"
+        return fix, Hc, x_fix, P_fix, self._phase_residuals(rows, sd_phase, los, wl, x_lin, x_fix)
+
+    @staticmethod
+    def _phase_residuals(rows, sd_phase, los, wl, x_lin, x) -> np.ndarray:
+        """DD phase residuals [m] of a state x, the rows' SD phases formed at the linearisation point."""
+        dx = x[:3] - x_lin
         r = np.array(rows)
         i, iref, k, ref, f = (r[:, c].astype(int) for c in range(5))
         y = sd_phase[k, f] - sd_phase[ref, f]
-        pred = -np.einsum("ij,j->i", los[k] - los[ref], dx) + wl[k, f] * x_fix[i] - wl[ref, f] * x_fix[iref]
-        return fix, Hc, x_fix, P_fix, y - pred
+        pred = -np.einsum("ij,j->i", los[k] - los[ref], dx) + wl[k, f] * x[i] - wl[ref, f] * x[iref]
+        return y - pred
 
     def _accept_fix(self, sol, fix, Hc, x_fix, P_fix, n_all) -> None:
         sol.status = Status.FIX
@@ -664,6 +704,57 @@ class RtkFilter:
 
     def _float_or_single(self, t, spp, age, n, msg) -> RtkSolution:
         return self._single(t, spp, msg, age)
+
+
+def bounded_partial_fix(a_hat: np.ndarray, Q: np.ndarray, min_success_rate: float, ratio_threshold: float,
+                        min_count: int, max_tries: int = MAX_PARTIAL_FIX_TRIES) -> PartialFix | None:
+    """Partial ambiguity resolution with a bounded cost (the policy of `augnet.gnss.ambiguity.partial_fix`,
+    built from its LAMBDA pieces): in the decorrelated L^T D L ordering, take the largest trailing block
+    whose bootstrapped success rate reaches `min_success_rate`, search it, and accept it if the ratio
+    test passes; otherwise drop the worst-determined leading ambiguity and retry, at most `max_tries`
+    searches.  The full set is searched first when it qualifies.
+    """
+    n = a_hat.shape[0]
+    if n < max(min_count, 1):
+        return None
+    Q = 0.5 * (Q + Q.T)
+    L, D = ldl(Q)
+    L, D, Z = reduce(L, D)
+    zs = Z.T @ a_hat
+    # success rates of every trailing block at once: products of the per-ambiguity factors
+    factors = np.array([bootstrap_success_rate([d]) for d in D])
+    tail = np.cumprod(factors[::-1])[::-1]
+    starts = [k for k in range(0, n - min_count + 1) if tail[k] >= min_success_rate]
+    for start in starts[:max_tries]:
+        # A float solution biased by unmodelled errors (ionosphere on a long baseline, multipath) is
+        # far from every integer: its bootstrapped norm fails a chi-square test, and the search,
+        # whose ellipsoid that norm sizes, would only burn seconds to fail the ratio test anyway.
+        q_boot, rms_frac = _bootstrapped_norm(L[start:, start:], D[start:], zs[start:])
+        # Both tests, because after fix-and-hold the covariance is far below the true (time-correlated)
+        # error and the chi-square test alone would refuse floats that sit a few hundredths of a cycle
+        # from their integers.
+        if q_boot > chi2_quantile(n - start, FLOAT_CONSISTENCY_FALSE_ALARM) and rms_frac > BIASED_FLOAT_RMS_CYC:
+            continue
+        cand, norms = search(L[start:, start:], D[start:], zs[start:], 2)
+        ratio = float(norms[1] / norms[0]) if norms[0] > 0 else math.inf
+        if ratio >= ratio_threshold:
+            return PartialFix(Zs=Z[:, start:], z_fixed=cand[0], ratio=ratio, success_rate=float(tail[start]))
+    return None
+
+
+def _bootstrapped_norm(L: np.ndarray, D: np.ndarray, zs: np.ndarray) -> float:
+    """(squared distance, RMS conditional fraction [cycles]) of the integer bootstrapping (sequential
+    conditional rounding) solution from the float ambiguities, in the metric of their covariance
+    L^T diag(D) L (last index first)."""
+    n = len(D)
+    z = np.zeros(n)
+    zb = np.zeros(n)
+    dist = 0.0
+    for k in range(n - 1, -1, -1):
+        zb[k] = zs[k] + float((z[k + 1:] - zb[k + 1:]) @ L[k + 1:, k])
+        z[k] = round(zb[k])
+        dist += (zb[k] - z[k]) ** 2 / D[k]
+    return dist, float(np.sqrt(np.mean((zb - z) ** 2)))
 
 
 def _any_code(obs: EpochObs) -> np.ndarray:
