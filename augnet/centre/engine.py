@@ -1,0 +1,213 @@
+"""The control centre's processing core: station bytes in, VRS bytes and correction models out.
+
+Sans-IO: the service feeds it station stream bytes with `feed(station, data, now)` and calls `tick(now)`
+(once or more per second); `tick` solves every epoch the aligner releases, writes each VRS session's RTCM to
+its sink, and queues the correction model and alarms in `outbox` for the service to publish on the bus.
+`CentreStreamFactory` adapts it to the NTRIP caster's stream-factory interface (a VRS mountpoint's client
+gets a session once its GGA is known; `update_position` moves its virtual station).
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import logging
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from augnet.centre.baseline import BaselineConfig
+from augnet.centre.ingest import EpochAligner, StationDecoder
+from augnet.centre.network import NetworkEpoch, NetworkSolver
+from augnet.centre.vrs import VrsEpoch, synthesize
+from augnet.centre.vrs_stream import VrsStreamEncoder
+from augnet.gnss.ephemeris import Ephemeris, NavigationData
+from augnet.gnss.geometry import geodetic_deg_to_ecef
+
+log = logging.getLogger(__name__)
+
+# RTCM station ids of VRS sessions: 2000.. (real stations use low ids; DF003 holds 0..4095)
+FIRST_VRS_STATION_ID = 2000
+MAX_STATION_ID = 4095
+SUBJECT_CORRECTIONS = "augnet.corrections.{network}"
+SUBJECT_ALARMS = "augnet.alarms.{network}"
+
+
+@dataclass
+class Session:
+    client_id: str
+    sink: Callable[[bytes], None]
+    point_ecef: np.ndarray
+    station_id: int
+    opened_t: float | None = None
+    bytes_sent: int = 0
+    epochs_sent: int = 0
+
+
+@dataclass
+class EpochReport:
+    """What one solved epoch produced (for the console, tests and the run report)."""
+
+    t_gpst: float
+    network: NetworkEpoch
+    vrs: VrsEpoch | None
+    sessions: int
+    stations: list[str] = field(default_factory=list)
+
+
+class CentreEngine:
+    def __init__(self, stations: dict[str, np.ndarray], t_ref_gpst: float, network_name: str = "line",
+                 master: str | None = None, config: BaselineConfig | None = None,
+                 ephemerides: list[Ephemeris] | None = None, msm_level: int = 7):
+        self.network_name = network_name
+        self.stations = {k: np.asarray(v, float) for k, v in stations.items()}
+        self.decoders = {name: StationDecoder(name, t_ref_gpst) for name in stations}
+        self.aligner = EpochAligner(list(stations))
+        self.network = NetworkSolver(self.stations, master=master, config=config)
+        self._ephemerides: dict[tuple, Ephemeris] = {}
+        self.nav = NavigationData([])
+        if ephemerides:
+            self._add_ephemerides(ephemerides)
+        self.encoder = VrsStreamEncoder(msm_level)
+        self.sessions: dict[str, Session] = {}
+        self._station_ids = itertools.count(FIRST_VRS_STATION_ID)
+        self.outbox: list[tuple[str, bytes]] = []  # (bus subject, payload) for the service to publish
+        self.last: EpochReport | None = None
+        self.epochs_solved = 0
+
+    # --- inputs ---------------------------------------------------------------------------------
+
+    def feed(self, station: str, data: bytes, now: float) -> None:
+        dec = self.decoders.get(station)
+        if dec is None:
+            return
+        epochs = dec.feed(data)
+        new = dec.take_ephemerides()
+        if new:
+            self._add_ephemerides(new)
+        for ep in epochs:
+            self.aligner.add(ep, now)
+
+    def _add_ephemerides(self, ephs: list[Ephemeris]) -> None:
+        changed = False
+        for e in ephs:
+            key = (e.sat, e.week, e.toe, e.iode, e.data_sources)
+            if key not in self._ephemerides:
+                self._ephemerides[key] = e
+                changed = True
+        if changed:
+            self.nav = NavigationData(list(self._ephemerides.values()))
+
+    # --- sessions (one per VRS client) ----------------------------------------------------------
+
+    def open_session(self, client_id: str, lat_deg: float, lon_deg: float, h_m: float,
+                     sink: Callable[[bytes], None]) -> Session:
+        sid = next(self._station_ids)
+        if sid > MAX_STATION_ID:
+            self._station_ids = itertools.count(FIRST_VRS_STATION_ID)
+            sid = next(self._station_ids)
+        point = geodetic_deg_to_ecef(lat_deg, lon_deg, h_m)
+        s = Session(client_id, sink, point, sid)
+        self.sessions[client_id] = s
+        self.encoder.add(client_id, sid, point)
+        return s
+
+    def move_session(self, client_id: str, lat_deg: float, lon_deg: float, h_m: float) -> None:
+        s = self.sessions.get(client_id)
+        if s is None:
+            return
+        s.point_ecef = geodetic_deg_to_ecef(lat_deg, lon_deg, h_m)
+        self.encoder.move(client_id, s.point_ecef)
+
+    def close_session(self, client_id: str) -> None:
+        self.sessions.pop(client_id, None)
+        self.encoder.remove(client_id)
+
+    # --- processing -----------------------------------------------------------------------------
+
+    def tick(self, now: float) -> list[EpochReport]:
+        reports = []
+        for t, got in self.aligner.ready(now):
+            if len(self.nav) == 0:
+                continue  # no broadcast ephemerides yet: nothing can be solved
+            reports.append(self._solve(t, got))
+        return reports
+
+    def _solve(self, t: float, epochs) -> EpochReport:
+        eps = {name: epochs.get(name) for name in self.stations}
+        ne = self.network.update(eps, self.nav)
+        self.epochs_solved += 1
+        vrs = None
+        ids = list(self.sessions)
+        if ids:
+            points = np.array([self.sessions[c].point_ecef for c in ids])
+            vrs = synthesize(ne, {k: v for k, v in eps.items() if v is not None}, points, self.nav)
+            if vrs is not None:
+                out = self.encoder.encode(ids, vrs, self.nav)
+                for cid in ids:
+                    s = self.sessions[cid]
+                    data = out.get(cid, b"")
+                    if not data:
+                        continue
+                    try:
+                        s.sink(data)
+                    except Exception:  # a sink that fails must not stop the others  # noqa: BLE001
+                        log.exception("VRS sink of %s failed", cid)
+                    s.bytes_sent += len(data)
+                    s.epochs_sent += 1
+        self.outbox.append((SUBJECT_CORRECTIONS.format(network=self.network_name), correction_model_json(ne)))
+        for alarm in ne.alarms:
+            self.outbox.append((SUBJECT_ALARMS.format(network=self.network_name), json.dumps({
+                "kind": alarm.kind, "subject": alarm.subject, "severity": alarm.severity,
+                "message": alarm.message, "t_gpst": alarm.t_gpst, "cleared": alarm.cleared}).encode()))
+        report = EpochReport(t, ne, vrs, len(ids), sorted(k for k, v in eps.items() if v is not None))
+        self.last = report
+        return report
+
+    def drain_outbox(self) -> list[tuple[str, bytes]]:
+        out, self.outbox = self.outbox, []
+        return out
+
+
+def _nan_to_none(a: np.ndarray) -> list:
+    return [[None if not np.isfinite(v) else round(float(v), 5) for v in row] for row in np.atleast_2d(a)]
+
+
+def correction_model_json(ne: NetworkEpoch) -> bytes:
+    """The epoch's correction model as published on the bus: master, stations (east/north from the
+    master), reference satellites, DD residuals (ionosphere on f1 and non-dispersive) of every station
+    against the master, exclusions and per-baseline quality. Enough for a caster node elsewhere to
+    interpolate for its own clients."""
+    return json.dumps({
+        "t_gpst": ne.t_gpst, "master": ne.master, "stations": ne.stations,
+        "station_en_m": [[round(float(v), 3) for v in row] for row in ne.station_en_m],
+        "refs": ne.refs, "sats": [str(s) for s in ne.sats],
+        "dd_iono_m": _nan_to_none(ne.dd_iono_m), "dd_trop_m": _nan_to_none(ne.dd_trop_m),
+        "excluded": sorted(ne.excluded), "present": ne.present,
+        "fixed_fraction": {k: round(v, 3) for k, v in ne.fixed_fraction().items()},
+        "misclosures": ne.misclosures,
+    }, separators=(",", ":")).encode()
+
+
+class _Handle:
+    def __init__(self, engine: CentreEngine, client_id: str):
+        self.engine = engine
+        self.client_id = client_id
+
+    def update_position(self, fix) -> None:
+        self.engine.move_session(self.client_id, fix.lat_deg, fix.lon_deg, fix.height_m)
+
+    def close(self) -> None:
+        self.engine.close_session(self.client_id)
+
+
+class CentreStreamFactory:
+    """The NTRIP caster's VRS stream factory, backed by a `CentreEngine` in the same process."""
+
+    def __init__(self, engine: CentreEngine):
+        self.engine = engine
+
+    def open(self, client_id: str, mount: str, fix, sink) -> _Handle:
+        self.engine.open_session(client_id, fix.lat_deg, fix.lon_deg, fix.height_m, sink)
+        return _Handle(self.engine, client_id)
