@@ -61,8 +61,10 @@ class BaliseDetector:
         self._direction = 1
         self._skipped = False
         self._by_track: dict[str, list] = {}
+        self._balise_along: dict[str, float] = {}
         for b in db.balises:
             self._by_track.setdefault(b.track, []).append(b)
+            self._balise_along[b.id] = db.along_m(b.track, b.km)
 
     def update(self, time: float, match: MapMatch) -> list[BaliseEvent]:
         """Feed one epoch's map match; returns (and sinks) the captures decided at this epoch."""
@@ -77,9 +79,8 @@ class BaliseDetector:
         ref_along = match.along_m + self.lever_arm_m * self._direction
         if same:
             a0, a1, t0 = prev[3], ref_along, prev[0]
-            track = self.db.tracks[match.track]
             for b in self._by_track.get(match.track, []):
-                s = (b.km - track.km_start) * 1000.0
+                s = self._balise_along[b.id]
                 # half-open interval so a balise exactly on an epoch is captured once
                 if (a1 > a0 and a0 < s <= a1) or (a1 < a0 and a1 <= s < a0):
                     frac = (s - a0) / (a1 - a0)

@@ -8,7 +8,8 @@ its track geometry to it, onboard never imports the simulator):
       "name": "scenario name",
       "tracks": [
         {"id": "UP", "line": "L1", "name": "up main line", "km_start": 0.0,
-         "points": [[lat_deg, lon_deg, h_m], ...]}          # WGS 84, ellipsoidal height, in km order
+         "points": [[lat_deg, lon_deg, h_m], ...],          # WGS 84, ellipsoidal height, in km order
+         "km": [0.0, 0.02, ...]}                             # optional: the line's chainage per point
       ],
       "km_posts": [{"track": "UP", "km": 1.0, "label": "K1"}],               # optional, informative
       "balises": [{"id": "VB-0001", "track": "UP", "km": 1.2345,
@@ -16,8 +17,9 @@ its track geometry to it, onboard never imports the simulator):
     }
 
 Points are joined by straight chords in ECEF (export them densely on curves: a chord 100 m long on
-a 1 km radius curve deviates 1.25 m; 20 m deviates 5 cm).  Chainage runs along the polyline:
-km = km_start + arc length / 1000.
+a 1 km radius curve deviates 1.25 m; 20 m deviates 5 cm).  Chainage: with a per-point "km" list
+(a line's chainage is usually that of its centre line, so parallel tracks share km posts), km is
+interpolated between points by arc length; without it km = km_start + arc length / 1000.
 
 Map matching projects the antenna position onto every track segment at once (numpy over segments),
 keeps the nearest point per track, and picks the track with the smallest cross-track offset.
@@ -77,6 +79,7 @@ class Track:
     name: str
     km_start: float
     points_llh: np.ndarray  # (n, 3) lat deg, lon deg, h m
+    km_points: np.ndarray | None = None  # (n,) chainage of each point [km], or None
 
 
 @dataclass(frozen=True)
@@ -143,8 +146,13 @@ class TrackDatabase:
                 pts = np.asarray(t["points"], dtype=float)
                 if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 2 or not np.all(np.isfinite(pts)):
                     raise TrackMapError(f"track {t.get('id')}: points must be >= 2 finite [lat, lon, h]")
+                kms = None
+                if t.get("km") is not None:
+                    kms = np.asarray(t["km"], dtype=float)
+                    if kms.shape != (len(pts),) or not np.all(np.isfinite(kms)) or np.any(np.diff(kms) < 0):
+                        raise TrackMapError(f"track {t.get('id')}: 'km' must give one increasing chainage per point")
                 tracks.append(Track(str(t["id"]), str(t.get("line", "")), str(t.get("name", "")),
-                                    float(t.get("km_start", 0.0)), pts))
+                                    float(kms[0] if kms is not None else t.get("km_start", 0.0)), pts, kms))
             balises = [VirtualBalise(str(b["id"]), str(b["track"]), float(b["km"]), bytes.fromhex(b.get("telegram", "")),
                                      bool(b.get("linked", True))) for b in d.get("balises", [])]
             posts = [KmPost(str(p["track"]), float(p["km"]), str(p.get("label", ""))) for p in d.get("km_posts", [])]
@@ -159,7 +167,9 @@ class TrackDatabase:
             "format": FORMAT,
             "name": self.name,
             "tracks": [{"id": t.id, "line": t.line, "name": t.name, "km_start": t.km_start,
-                        "points": t.points_llh.tolist()} for t in self.tracks.values()],
+                        "points": t.points_llh.tolist(),
+                        **({"km": t.km_points.tolist()} if t.km_points is not None else {})}
+                       for t in self.tracks.values()],
             "km_posts": [{"track": p.track, "km": p.km, "label": p.label} for p in self.km_posts],
             "balises": [{"id": b.id, "track": b.track, "km": b.km, "telegram": b.telegram.hex(), "linked": b.linked}
                         for b in self.balises],
@@ -182,7 +192,7 @@ class TrackDatabase:
     # geometry
 
     def _build_segments(self, tracks: list[Track]) -> None:
-        A, B, trk, s0 = [], [], [], []
+        A, B, trk, s0, K0, K1 = [], [], [], [], [], []
         self.track_length_m: dict[str, float] = {}
         for ti, t in enumerate(tracks):
             xyz = geodetic_deg_to_ecef(t.points_llh[:, 0], t.points_llh[:, 1], t.points_llh[:, 2])
@@ -190,6 +200,9 @@ class TrackDatabase:
             length = np.linalg.norm(seg, axis=1)
             keep = length > 1e-6  # repeated points make no segment
             cum = np.concatenate(([0.0], np.cumsum(length)))
+            kms = t.km_points if t.km_points is not None else t.km_start + cum / 1000.0
+            K0.append(kms[:-1][keep])
+            K1.append(kms[1:][keep])
             A.append(xyz[:-1][keep])
             B.append(xyz[1:][keep])
             s0.append(cum[:-1][keep])
@@ -199,6 +212,8 @@ class TrackDatabase:
         self._A = np.concatenate(A)
         B = np.concatenate(B)
         self._s0 = np.concatenate(s0)
+        self._km0 = np.concatenate(K0)
+        self._km1 = np.concatenate(K1)
         self._trk = np.concatenate(trk)
         d = B - self._A
         self._len = np.linalg.norm(d, axis=1)
@@ -212,21 +227,25 @@ class TrackDatabase:
 
     def position_at(self, track: str, km: float) -> np.ndarray:
         """ECEF point on a track at a chainage (for tests, balise placement, simulators)."""
-        t = self.tracks[track]
-        ti = self._track_ids.index(track)
-        s = (km - t.km_start) * 1000.0
-        m = np.flatnonzero(self._trk == ti)
-        j = m[np.clip(np.searchsorted(self._s0[m], s, side="right") - 1, 0, len(m) - 1)]
-        u = np.clip(s - self._s0[j], 0.0, self._len[j])
+        j, u = self._locate(track, km)
         return self._A[j] + u * self._T[j]
+
+    def along_m(self, track: str, km: float) -> float:
+        """Arc length from the track's first point to a chainage [m]."""
+        j, u = self._locate(track, km)
+        return float(self._s0[j] + u)
+
+    def _locate(self, track: str, km: float) -> tuple[int, float]:
+        ti = self._track_ids.index(track)
+        m = np.flatnonzero(self._trk == ti)
+        j = m[np.clip(np.searchsorted(self._km0[m], km, side="right") - 1, 0, len(m) - 1)]
+        span = self._km1[j] - self._km0[j]
+        frac = (km - self._km0[j]) / span if span > 0 else 0.0
+        return int(j), float(np.clip(frac, 0.0, 1.0) * self._len[j])
 
     def tangent_at(self, track: str, km: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(tangent, left horizontal normal, up) unit vectors in ECEF at a chainage."""
-        t = self.tracks[track]
-        ti = self._track_ids.index(track)
-        s = (km - t.km_start) * 1000.0
-        m = np.flatnonzero(self._trk == ti)
-        j = m[np.clip(np.searchsorted(self._s0[m], s, side="right") - 1, 0, len(m) - 1)]
+        j, _ = self._locate(track, km)
         return self._T[j], self._N[j], self._U[j]
 
     # ------------------------------------------------------------------------------------------
@@ -286,8 +305,8 @@ class TrackDatabase:
         confirmed = bool(math.isfinite(xpl) and (abs(c) + xpl < 0.5 * nearest_other if others else xpl < gate_m))
         msg = "track confirmed" if confirmed else (
             f"track not confirmed: cross-track PL {xpl:.2f} m against {nearest_other:.2f} m to the next track")
-        return MapMatch(tid, tr.line, tr.km_start + along / 1000.0, along, c, vertical, apl, xpl, confirmed,
-                        nearest_other, near, msg)
+        km = float(self._km0[j] + (self._km1[j] - self._km0[j]) * u[j] / self._len[j])
+        return MapMatch(tid, tr.line, km, along, c, vertical, apl, xpl, confirmed, nearest_other, near, msg)
 
 
 def _off_map(msg: str) -> MapMatch:
