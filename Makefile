@@ -16,7 +16,7 @@ run: venv
 	$(VENV)/bin/augnet run
 
 test: venv debs
-	$(PY) -m pytest -q
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(PY) -m pytest -q
 
 bench: venv debs
 	$(VENV)/bin/augnet bench all
