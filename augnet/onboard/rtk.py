@@ -229,11 +229,10 @@ class RtkFilter:
 
     # -----------------------------------------------------------------------------------------
 
-    def step(self, rover: EpochObs, base: EpochObs | None, base_time: float | None = None) -> RtkSolution:
+    def step(self, rover: EpochObs, base: EpochObs | None) -> RtkSolution:
         """Process one rover epoch with the latest base epoch (None when there is none).
 
-        `base_time` is the base epoch's time when it differs from `base.time` (never needed for
-        RINEX); the age of corrections is rover time minus base time.
+        The age of corrections is rover time minus base time; over `max_age_s` the status is SINGLE.
         """
         if not np.isfinite(rover.time):
             return RtkSolution(math.nan, Status.NONE, np.full(3, np.nan), np.full((3, 3), np.nan),

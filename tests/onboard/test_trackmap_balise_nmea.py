@@ -224,3 +224,32 @@ def test_rmc_speed_and_course_from_velocity():
     assert msg.status == "A" and msg.posMode == "R"
     assert msg.spd == pytest.approx(14.142 * 3600 / 1852, abs=0.01)
     assert msg.cog == pytest.approx(45.0, abs=0.01)
+
+
+def test_onboard_unit_ties_rtk_map_balises_and_nmea(shared_data):
+    """One step through the whole unit on a synthetic rover placed on the test line's track."""
+    from augnet.gnss.ephemeris import NavigationData
+    from augnet.gnss.rinex import read_nav
+    from augnet.onboard.observations import epochs
+    from augnet.onboard.rtk import RtkOptions
+    from augnet.onboard.unit import OnboardUnit
+    from tests.onboard.synth import simulate, visible_sats
+
+    nav = NavigationData(read_nav(shared_data / "rinex/static-1m-2024/base.nav").ephemerides)
+    db = make_db()
+    t = 1403252400.0 + np.arange(6.0)
+    speed = 30.0
+    path = np.array([db.position_at("UP", 10.49 + speed * k / 1000.0) for k in range(6)])
+    base_pos = db.position_at("DN", 10.0)
+    sats = visible_sats(nav, base_pos, t[0])
+    base, _ = simulate(nav, sats, t, base_pos, seed=1)
+    rover, _ = simulate(nav, sats, t, path, seed=2)
+    unit = OnboardUnit(nav, base_pos, db, options=RtkOptions(systems=("G", "E")))
+    outs = [unit.step(r, b) for r, b in zip(epochs(rover), epochs(base))]
+    assert all(o.solution.status == Status.FIX for o in outs)
+    assert all(o.match.track == "UP" and o.match.confirmed for o in outs)
+    assert [e.balise_id for e in unit.sink.events] == ["VB1"]
+    assert outs[0].gga.startswith("$GNGGA") and ",4," in outs[0].gga
+    rec = outs[-1].record()
+    assert rec["track"] == "UP" and rec["status"] == "fix" and rec["track_confirmed"]
+    assert rec["km"] == pytest.approx(10.49 + 5 * speed / 1000.0, abs=0.001)

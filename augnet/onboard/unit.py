@@ -1,0 +1,71 @@
+"""The onboard positioning unit: one epoch in, everything the train and the console need out.
+
+    rover epoch + latest base epoch -> RTK solution -> map match (track, km, protection levels)
+    -> virtual balise captures (to the sink) -> NMEA GGA/RMC -> the console's solution record
+
+Corrections may come from a file (post-processing) or from `CorrectionDecoder` fed by the NTRIP
+client; the unit only needs the latest base epoch and its coordinates.  Nothing here raises on data.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+from augnet.gnss.ephemeris import NavigationData
+from augnet.onboard.balise import BaliseDetector, BaliseEvent, BaliseSink, ListSink
+from augnet.onboard.nmea import gga, rmc
+from augnet.onboard.observations import EpochObs
+from augnet.onboard.rtk import RtkFilter, RtkOptions, RtkSolution
+from augnet.onboard.solution import SolutionRecord
+from augnet.onboard.trackmap import DEFAULT_INTEGRITY_RISK, MapMatch, TrackDatabase
+
+
+@dataclass
+class UnitOutput:
+    solution: RtkSolution
+    match: MapMatch | None
+    balises: list[BaliseEvent] = field(default_factory=list)
+    gga: str = ""
+    rmc: str = ""
+
+    def record(self) -> dict:
+        """A flat JSON-friendly dict for the console (solution record plus track position)."""
+        d = asdict(SolutionRecord.from_solution(self.solution))
+        m = self.match
+        d.update({
+            "track": m.track if m else None, "km": m.km if m else None,
+            "cross_track_m": m.cross_m if m else None, "along_pl_m": m.along_pl_m if m else None,
+            "cross_pl_m": m.cross_pl_m if m else None, "track_confirmed": bool(m and m.confirmed),
+            "balises": [b.balise_id for b in self.balises],
+        })
+        return d
+
+
+class OnboardUnit:
+    def __init__(self, nav: NavigationData, base_position_m, track_db: TrackDatabase | None = None,
+                 sink: BaliseSink | None = None, options: RtkOptions | None = None,
+                 integrity_risk: float = DEFAULT_INTEGRITY_RISK, lever_arm_m: float = 0.0):
+        self.rtk = RtkFilter(nav, base_position_m, options)
+        self.track_db = track_db
+        self.integrity_risk = integrity_risk
+        self.sink = sink or ListSink()
+        self.balises = BaliseDetector(track_db, self.sink, lever_arm_m) if track_db is not None else None
+
+    def set_base_position(self, base_position_m) -> None:
+        """A new reference station (or a repositioned VRS): the filter restarts its ambiguities."""
+        import numpy as np
+
+        p = np.asarray(base_position_m, dtype=float)
+        if not np.allclose(p, self.rtk.base_position_m, atol=1e-3):
+            self.rtk.base_position_m = p
+            self.rtk.reset()
+
+    def step(self, rover: EpochObs, base: EpochObs | None) -> UnitOutput:
+        sol = self.rtk.step(rover, base)
+        match = None
+        events: list[BaliseEvent] = []
+        if self.track_db is not None:
+            match = self.track_db.match(sol.position_m, sol.covariance_m2, self.integrity_risk)
+            if self.balises is not None:
+                events = self.balises.update(sol.time, match)
+        return UnitOutput(sol, match, events, gga(sol), rmc(sol))
