@@ -7,6 +7,8 @@ from typing import List, Optional
 
 import typer
 
+PROGRESS_STEP = 0.1  # share of the epochs between progress lines
+
 app = typer.Typer(no_args_is_help=True, help="The network engine (control centre).")
 
 
@@ -23,9 +25,16 @@ def vrs(
     """Write a virtual reference station RINEX file for a point from a network's observation files."""
     from augnet.centre.postprocess import PostprocessError, run_vrs
 
+    step = {"next": 0.0}
+
+    def progress(done: int, total: int) -> None:  # a line on stderr every tenth of the run
+        if done / total >= step["next"]:
+            typer.echo(f"epoch {done}/{total}", err=True)
+            step["next"] += PROGRESS_STEP
+
     try:
         result, lines = run_vrs(record, at, out, nav=nav, coords=coords, exclude=exclude or (), master=master,
-                                marker_name=name)
+                                marker_name=name, progress=progress)
     except PostprocessError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(2)
