@@ -300,6 +300,7 @@ class BaselineSummary:
     first_epoch_t: float | None = None
     first_fix_t: float | None = None  # first epoch with BASELINE_FIXED_SHARE of its DDs fixed
     last_fixed_share: float = 0.0
+    last_fixed_by_system: dict = field(default_factory=dict)  # system -> (fixed, DD ambiguities) at the end
 
     @property
     def mean_fixed_fraction(self) -> float:
@@ -399,6 +400,11 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
             bs.epochs += 1
             bs.fixed_share_sum += res.fixed_fraction
             bs.last_fixed_share = res.fixed_fraction
+            nonref = ~res.is_reference()
+            systems = np.array([str(x)[0] for x in res.sats])
+            bs.last_fixed_by_system = {sys_: (int((res.fixed & nonref & (systems == sys_)).sum()),
+                                              int((nonref & (systems == sys_)).sum()))
+                                       for sys_ in sorted(set(systems.tolist()))}
             if bs.first_epoch_t is None:
                 bs.first_epoch_t = float(t)
             if bs.first_fix_t is None and res.fixed_fraction >= BASELINE_FIXED_SHARE:
@@ -538,8 +544,9 @@ def summary_lines(result: VrsResult) -> list[str]:
         any_fixed |= b.first_fix_t is not None
         fix_txt = (f"first fix after {ttf:.0f} s" if ttf is not None
                    else f"never reached {BASELINE_FIXED_SHARE:.0%} of its ambiguities fixed")
+        per_sys = ", ".join(f"{k} {v[0]}/{v[1]}" for k, v in b.last_fixed_by_system.items())
         lines.append(f"baseline {b.name} ({b.length_km:.1f} km): {b.epochs} epochs, mean fixed fraction "
-                     f"{b.mean_fixed_fraction:.0%}, last {b.last_fixed_share:.0%}, {fix_txt}")
+                     f"{b.mean_fixed_fraction:.0%}, last {b.last_fixed_share:.0%} ({per_sys}), {fix_txt}")
     if result.misclosures:
         lines.append(f"triangle misclosures (satellites voided for an epoch): {result.misclosures}")
     n = len(result.epochs)
