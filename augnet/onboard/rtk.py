@@ -44,6 +44,7 @@ from augnet.onboard.spp import (
     SppOptions,
     SppResult,
     chi2_quantile,
+    doppler_velocity,
     geometric_range,
     satellite_positions,
     solve_spp,
@@ -511,6 +512,9 @@ class RtkFilter:
                 return self._single(t, spp, f"filter {gap:.0f} m from SPP, restarted", age)
         if opt.ambiguity_resolution:
             self._resolve(sol, groups, ro, sd_phase, los_r, wl, x_rov)
+        if not np.all(np.isfinite(sol.velocity_m_s)):
+            # no dynamic model: the velocity (for RMC, odometry) comes from the rover's Dopplers
+            sol.velocity_m_s, _ = doppler_velocity(rover, self.nav, sol.position_m, opt.elevation_mask_rad)
         return sol
 
     def _amb_known(self, key) -> bool:

@@ -13,6 +13,7 @@ CSV columns (one header line, then one row per epoch; empty cells where a value 
   sd_e_m, sd_n_m, sd_u_m  standard deviations, local east/north/up
   age_s         age of corrections (rover time minus base time)
   baseline_m
+  vel_e_m_s, vel_n_m_s, vel_u_m_s   velocity (filter state with dynamics, else from Dopplers)
   message       why the status is what it is
 """
 
@@ -32,7 +33,7 @@ from augnet.onboard.rtk import RtkSolution
 CSV_COLUMNS = (
     "gpst_s", "gps_week", "tow_s", "utc", "x_m", "y_m", "z_m", "lat_deg", "lon_deg", "h_m",
     "status", "status_q", "ratio", "success_rate", "n_sats", "n_fixed", "sd_e_m", "sd_n_m", "sd_u_m",
-    "age_s", "baseline_m", "message",
+    "age_s", "baseline_m", "vel_e_m_s", "vel_n_m_s", "vel_u_m_s", "message",
 )
 
 
@@ -59,6 +60,9 @@ class SolutionRecord:
     age_s: float
     baseline_m: float
     message: str
+    vel_e_m_s: float = math.nan
+    vel_n_m_s: float = math.nan
+    vel_u_m_s: float = math.nan
 
     @classmethod
     def from_solution(cls, sol: RtkSolution) -> "SolutionRecord":
@@ -69,12 +73,15 @@ class SolutionRecord:
             C = R @ np.asarray(sol.covariance_m2, dtype=float) @ R.T
             sd = np.sqrt(np.clip(np.diag(C), 0.0, None))
             lat, lon, h = math.degrees(llh[0]), math.degrees(llh[1]), float(llh[2])
+            venu = R @ np.asarray(sol.velocity_m_s, dtype=float)
         else:
             sd = np.full(3, math.nan)
             lat = lon = h = math.nan
+            venu = np.full(3, math.nan)
         return cls(float(sol.time), float(p[0]), float(p[1]), float(p[2]), lat, lon, h, sol.status_name,
                    int(sol.status), float(sol.ratio), float(sol.success_rate), int(sol.n_sats), int(sol.n_fixed),
-                   float(sd[0]), float(sd[1]), float(sd[2]), float(sol.age_s), float(sol.baseline_m), sol.message)
+                   float(sd[0]), float(sd[1]), float(sd[2]), float(sol.age_s), float(sol.baseline_m), sol.message,
+                   float(venu[0]), float(venu[1]), float(venu[2]))
 
 
 def _fmt(v, digits: int) -> str:
@@ -102,7 +109,8 @@ def write_csv(records: Iterable[SolutionRecord | RtkSolution], out: IO[str]) -> 
             _fmt(r.lat_deg, 9), _fmt(r.lon_deg, 9), _fmt(r.h_m, 4),
             r.status, r.status_q, _fmt(r.ratio, 1), _fmt(r.success_rate, 6), r.n_sats, r.n_fixed,
             _fmt(r.sd_e_m, 4), _fmt(r.sd_n_m, 4), _fmt(r.sd_u_m, 4),
-            _fmt(r.age_s, 1), _fmt(r.baseline_m, 3), r.message,
+            _fmt(r.age_s, 1), _fmt(r.baseline_m, 3),
+            _fmt(r.vel_e_m_s, 3), _fmt(r.vel_n_m_s, 3), _fmt(r.vel_u_m_s, 3), r.message,
         ])
         n += 1
     return n

@@ -302,3 +302,52 @@ def _iterate(obs, sp, pr, tgd, iono_scale, usable, sys_, x0, opt, alpha, beta) -
     if np.any(np.abs(v) > GROSS_RESIDUAL_M):
         res.chi2 = math.inf  # forces RAIM exclusion of the blunder
     return res
+
+
+# Doppler velocity: residuals beyond this [m/s] are left out (a wrong Doppler, a cycle-slip spike).
+DOPPLER_MAX_RESIDUAL_M_S = 5.0
+DOPPLER_SIGMA_M_S = 0.05  # range-rate noise of a geodetic / good automotive receiver, per satellite
+
+
+def doppler_velocity(obs: EpochObs, nav: NavigationData, position_m, mask_rad: float = math.radians(10.0)):
+    """(velocity ECEF [m/s] (3,), its covariance (3, 3)) from slot-0 Dopplers by least squares with a
+    receiver clock drift; NaNs when fewer than five Dopplers are usable.  Range rate = -lambda * D."""
+    nan = (np.full(3, np.nan), np.full((3, 3), np.nan))
+    p = np.asarray(position_m, dtype=float)
+    if not np.all(np.isfinite(p)):
+        return nan
+    o = obs.sanitised()
+    dop = o.doppler_hz[:, 0]
+    lam = o.wavelength_m[:, 0]
+    sp = satellite_positions(nav, o.sats, o.time, o.code_m[:, 0])
+    ok = sp.valid & np.isfinite(dop) & np.isfinite(lam)
+    if np.count_nonzero(ok) < 5:
+        return nan
+    _, los = geometric_range(np.where(ok[:, None], sp.position_m, p + 1.0), p)
+    _, el = azimuth_elevation(p, np.where(ok[:, None], sp.position_m, p + np.array([0.0, 0.0, 1.0])))
+    ok &= el >= mask_rad
+    if np.count_nonzero(ok) < 5:
+        return nan
+    idx = np.flatnonzero(ok)
+    e = los[idx]
+    rr = -lam[idx] * dop[idx]
+    # satellite motion and clock drift, and the Earth-rotation (Sagnac) rate for a receiver at rest
+    vs = sp.velocity_m_s[idx]
+    sag = OMEGA_E_GPS_RAD_S / SPEED_OF_LIGHT_M_S * (vs[:, 0] * p[1] - vs[:, 1] * p[0])
+    y = rr - np.einsum("ij,ij->i", e, vs) + SPEED_OF_LIGHT_M_S * sp.clock_drift_s_s[idx] - sag
+    H = np.column_stack((-e, np.ones(len(idx))))
+    use = np.ones(len(idx), bool)
+    for _ in range(2):
+        if np.count_nonzero(use) < 5:
+            return nan
+        sol, *_ = np.linalg.lstsq(H[use], y[use], rcond=None)
+        res = y - H @ sol
+        new = np.abs(res - np.median(res[use])) < DOPPLER_MAX_RESIDUAL_M_S
+        if np.array_equal(new, use):
+            break
+        use = new
+    try:
+        cov = np.linalg.inv(H[use].T @ H[use]) * DOPPLER_SIGMA_M_S**2
+    except np.linalg.LinAlgError:
+        return nan
+    return sol[:3], cov[:3, :3]

@@ -70,6 +70,9 @@ def test_static_1m_baseline_fixed_every_epoch_at_millimetre_level(shared_data, t
     assert int(rows[0]["n_sats"]) >= 20
     assert 0.0 < float(rows[0]["sd_u_m"]) < 0.05
     assert float(rows[0]["baseline_m"]) == pytest.approx(0.88, abs=0.05)
+    # a static antenna: Doppler velocity at the cm/s level
+    v = np.array([[float(row[k]) for k in ("vel_e_m_s", "vel_n_m_s", "vel_u_m_s")] for row in rows])
+    assert np.max(np.abs(v)) < 0.05
 
 
 RTKLIB_KINEMATIC_CONF = """\
