@@ -14,6 +14,7 @@ Bad input never raises: `solve_spp` returns a result with `ok=False` and a messa
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass, field
 from typing import NamedTuple, Sequence
 
@@ -94,7 +95,7 @@ def satellite_positions(nav: NavigationData, sats: Sequence[str], t_obs: float, 
     if n == 0 or len(nav) == 0:
         z = np.zeros((n, 3))
         return SatPositions(z, z, np.zeros(n), np.zeros(n), np.full(n, -1), np.zeros(n, bool), np.zeros(n))
-    idx = nav.select(sats, t_obs if t_select is None else t_select)
+    idx = _select_cached(nav, sats, float(t_obs if t_select is None else t_select))
     valid = (idx >= 0) & np.isfinite(pr)
     rows = nav.table.take(np.where(valid, idx, 0))
     t = np.full(n, float(t_obs))
@@ -106,6 +107,29 @@ def satellite_positions(nav: NavigationData, sats: Sequence[str], t_obs: float, 
     acc = np.where(valid, rows.accuracy_m, np.nan)
     return SatPositions(pos, vel, np.where(valid, st.clock_bias_s, np.nan),
                         np.where(valid, st.clock_drift_s_s, np.nan), np.where(valid, idx, -1), valid, acc)
+
+
+# Ephemeris selection changes only when a new set is uploaded (GPS every 2 h, Galileo every 10 min):
+# reusing a selection for this long [s] picks a set that is still valid and may be a few seconds
+# older than the newest, and saves ~2 ms per call (several calls per epoch).  Base and rover of one
+# epoch share the key, so they still use the same issue of data.
+SELECTION_CACHE_S = 10.0
+_SELECTION_CACHE_SIZE = 16
+# one small cache per NavigationData object, gone with it (never confused with another one)
+_selection_cache: "weakref.WeakKeyDictionary[NavigationData, dict]" = weakref.WeakKeyDictionary()
+
+
+def _select_cached(nav: NavigationData, sats: Sequence[str], t: float) -> np.ndarray:
+    cache = _selection_cache.setdefault(nav, {})
+    key = (tuple(str(x) for x in sats), math.floor(t / SELECTION_CACHE_S))
+    hit = cache.get(key)
+    if hit is not None:
+        return hit
+    idx = nav.select(list(key[0]), t)
+    if len(cache) >= _SELECTION_CACHE_SIZE:
+        cache.pop(next(iter(cache)))
+    cache[key] = idx
+    return idx
 
 
 def geometric_range(sat_pos_m, rx_m):
