@@ -36,7 +36,7 @@ from augnet.gnss.ambiguity import (
     search,
 )
 from augnet.gnss.ephemeris import NavigationData
-from augnet.gnss.geometry import azimuth_elevation, ecef_to_geodetic
+from augnet.gnss.geometry import azimuth_elevation, ecef_to_geodetic, enu_rotation
 from augnet.onboard.atmosphere import saastamoinen_m
 from augnet.onboard.cycleslip import SlipDetector
 from augnet.onboard.observations import EpochObs
@@ -345,7 +345,6 @@ class RtkFilter:
             F[0:3, 3:6] = np.eye(3) * dt
             F[0:3, 6:9] = np.eye(3) * 0.5 * dt * dt
             F[3:6, 6:9] = np.eye(3) * dt
-            n = len(self.x)
             self.x[:9] = F @ self.x[:9]
             Pk = self.P[:9, :9]
             Pka = self.P[:9, 9:]
@@ -354,11 +353,9 @@ class RtkFilter:
             self.P[9:, :9] = self.P[:9, 9:].T
             # white-jerk noise on acceleration, in local ENU then rotated to ECEF
             llh = ecef_to_geodetic(self.x[:3])
-            from augnet.gnss.geometry import enu_rotation
-
             R = enu_rotation(llh[0], llh[1])
             q = R.T @ np.diag([self.opt.accel_sigma_h**2, self.opt.accel_sigma_h**2, self.opt.accel_sigma_v**2]) @ R
-            # continuous white jerk integrated over dt (van Loan), acceleration-block dominant terms
+            # continuous white jerk integrated over dt: the exact discrete Q of the PVA model
             self.P[6:9, 6:9] += q * dt
             self.P[3:6, 3:6] += q * dt**3 / 3.0
             self.P[0:3, 0:3] += q * dt**5 / 20.0
@@ -368,7 +365,6 @@ class RtkFilter:
             self.P[6:9, 0:3] += q * dt**3 / 6.0
             self.P[0:3, 3:6] += q * dt**4 / 8.0
             self.P[3:6, 0:3] += q * dt**4 / 8.0
-            del n
 
     # -----------------------------------------------------------------------------------------
     # measurement update

@@ -5,7 +5,6 @@ Every bad-input case asserts a clear status and message and that no exception le
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 import pytest
