@@ -1,0 +1,248 @@
+"""Must-shows of `augnet vrs` with RTKLIB 2.4.3, a tool nobody here wrote.
+
+a. Real Dutch stations (nl-network-2021): RTKLIB's convbin reads our virtual RINEX and writes back the same
+   epochs and values.
+b. Simulated `network-70km` (quiet ionosphere), 12 minutes at a 2 s interval: our VRS at the check receiver check1
+   (35 km from every station) as base for rnx2rtkp, check1 as rover, against the simulator's truth; the same
+   rover with each physical station as base for comparison. Also rnx2rtkp's single-point solution of the
+   VRS file alone lands on the point it was synthesised for.
+
+Why the single-point check is on simulated data: in cbw10010.21n only G07 and G08 have an ephemeris within
+RTKLIB's 2 h of 00:00-00:09 (every other set starts at 02:00 or later), so RTKLIB computes no single-point
+solution for any station of that file (measured: 0 of 105 epochs for DELF itself).
+
+rnx2rtkp settings (the project's RTKLIB baseline settings, tests/stations/test_rtklib_baseline.py):
+kinematic, L1+L2, GPS+Galileo+BeiDou, 15 degree mask, broadcast ionosphere and Saastamoinen for the
+residual, continuous ambiguity resolution, ratio 3, forward filter (what a rover in the field gets); base
+position from the RINEX header (`ant2-postype=rinexhead`: the VRS header's APPROX POSITION is the point).
+"""
+
+from __future__ import annotations
+
+import csv
+import subprocess
+
+import numpy as np
+import pytest
+
+from augnet.centre.postprocess import parse_point, run_vrs, to_obsdata
+from augnet.gnss.geometry import ecef_to_enu
+from augnet.gnss.rinex import read_obs
+from stations.record import record
+from stations.scenario import load_scenario
+from tests.conftest import require_tool
+
+NL = "rinex/nl-network-2021"
+# 12 min at 2 s: 360 network epochs, ~0.15-0.55 s CPU each (4 baselines) on the shared 2-core machine, so the
+# module stays within a few minutes; 10 min at 1 Hz measured the same picture at twice the cost (see the
+# xfail reason), 20 min at 5 s a worse one (RTKLIB's first fix only after 8 min).
+DURATION_S = 720
+RATE_HZ = 0.5
+EPOCHS = int(DURATION_S * RATE_HZ)
+ROVER = "check1"
+CHECK_POINT = "39.5,116.7,35"  # check1 in network-70km.yaml: the point a surveyor asks the VRS for
+FIX_Q = 1  # RTKLIB solution quality: 1 fix, 2 float, 5 single
+WRONG_FIX_H_M = 0.10  # a "fixed" epoch this far from the truth horizontally has integers wrong
+GOOD_H_M = 0.05  # an epoch within this of the truth horizontally is RTK-grade for the comparison
+TARGET_FIX_RATE = 0.95  # issue 5 must-show: fixed in >= 95 % of epochs after the first fix
+TARGET_H95_M = 0.02  # ... and horizontal error <= 2 cm at 95 %
+
+CONFIG = """\
+pos1-posmode       =kinematic
+pos1-frequency     =l1+2
+pos1-soltype       =forward
+pos1-elmask        =15
+pos1-navsys        =41
+pos1-ionoopt       =brdc
+pos1-tropopt       =saas
+pos1-sateph        =brdc
+pos2-armode        =continuous
+pos2-arthres       =3
+pos2-gloarmode     =off
+pos2-bdsarmode     =on
+out-solformat      =xyz
+out-timeform       =tow
+out-outhead        =on
+ant2-postype       =rinexhead
+"""
+
+
+def _read_pos(path):
+    """rnx2rtkp xyz output (`-e` / out-solformat=xyz), times as week/TOW or date and time of day:
+    (seconds (E,), xyz (E, 3), Q (E,))."""
+    t, xyz, q = [], [], []
+    for line in open(path):
+        if line.startswith("%") or not line.strip():
+            continue
+        f = line.split()
+        if ":" in f[1]:
+            h, m, sec = f[1].split(":")
+            t.append(int(h) * 3600 + int(m) * 60 + float(sec))
+        else:
+            t.append(float(f[1]))
+        xyz.append([float(v) for v in f[2:5]])
+        q.append(int(f[5]))
+    return np.array(t), np.array(xyz).reshape(-1, 3), np.array(q, dtype=int)
+
+
+def _truth(path, rx):
+    for row in csv.DictReader(open(path)):
+        if row["receiver"] == rx:
+            return np.array([float(row["x_m"]), float(row["y_m"]), float(row["z_m"])])
+    raise KeyError(rx)
+
+
+def _rtk_figures(pos_path, truth_xyz):
+    """Fix rate after the first fix, horizontal errors, wrong fixes, against the truth."""
+    t, xyz, q = _read_pos(pos_path)
+    enu = ecef_to_enu(xyz - truth_xyz, truth_xyz)
+    h = np.hypot(enu[:, 0], enu[:, 1])
+    fixed = q == FIX_Q
+    out = {"epochs": len(t), "fixed": int(fixed.sum()), "h95_all_m": float(np.percentile(h, 95)),
+           "wrong_fixes": int((fixed & (h > WRONG_FIX_H_M)).sum()), "within_5cm": int((h < GOOD_H_M).sum())}
+    if fixed.any():
+        f0 = int(np.flatnonzero(fixed)[0])
+        out["first_fix_s"] = float(t[f0] - t[0])
+        out["fix_rate_after_first"] = float(fixed[f0:].mean())
+        out["h95_after_first_m"] = float(np.percentile(h[f0:], 95))
+        out["h95_fixed_m"] = float(np.percentile(h[fixed], 95))
+        # the epoch from which every later epoch is fixed (continuous fix to the end), if any
+        tail = np.flatnonzero(~fixed)
+        out["fixed_to_end_from_s"] = float(t[tail[-1] + 1] - t[0]) if len(tail) and tail[-1] + 1 < len(t) else (
+            float(t[f0] - t[0]) if not len(tail) else None)
+    return out
+
+
+def _fmt(name, f):
+    if not f["fixed"]:
+        return (f"{name}: {f['epochs']} epochs, never fixed; H95 (float) {f['h95_all_m'] * 100:.1f} cm; "
+                f"{f['within_5cm']} epochs within 5 cm")
+    return (f"{name}: {f['epochs']} epochs, {f['fixed']} fixed, first fix after {f['first_fix_s']:.0f} s, fixed "
+            f"{f['fix_rate_after_first']:.1%} of epochs after it, fixed to the end from "
+            f"{f['fixed_to_end_from_s']} s; H95 after first fix {f['h95_after_first_m'] * 100:.1f} cm, of fixed "
+            f"epochs {f['h95_fixed_m'] * 100:.1f} cm; wrong fixes (> {WRONG_FIX_H_M * 100:.0f} cm) "
+            f"{f['wrong_fixes']}; H95 of all epochs {f['h95_all_m'] * 100:.1f} cm; {f['within_5cm']} epochs within 5 cm")
+
+
+@pytest.fixture(scope="module")
+def network70(tmp_path_factory):
+    """network-70km recorded for 10 minutes, our VRS at check1, rnx2rtkp against VRS and every station."""
+    rnx2rtkp = require_tool("rnx2rtkp")
+    d = tmp_path_factory.mktemp("network70")
+    sc = load_scenario("network-70km").model_copy(update={"duration_s": DURATION_S, "rate_hz": RATE_HZ})
+    record(sc, d, rtcm=False)
+    vrs_path = d / "vrs.obs"
+    result, summary = run_vrs(d, CHECK_POINT, vrs_path)
+    truth = _truth(d / "truth.csv", ROVER)
+    conf = d / "rtk.conf"
+    conf.write_text(CONFIG)
+    figures = {}
+    for base in ["VRS"] + [s.name for s in result.stations]:
+        base_file = vrs_path if base == "VRS" else d / f"{base}.obs"
+        out = d / f"{ROVER}-{base}.pos"
+        subprocess.run([rnx2rtkp, "-k", str(conf), "-o", str(out), str(d / f"{ROVER}.obs"), str(base_file),
+                        str(d / "nav.rnx")], check=True, capture_output=True, timeout=300)
+        figures[base] = _rtk_figures(out, truth)
+    dist = {s.name: float(np.linalg.norm(s.xyz_m - truth)) for s in result.stations}
+    print("\n" + "\n".join(summary))
+    for base, f in figures.items():
+        print(_fmt(f"rover {ROVER}, base {base}" + (f" ({dist[base] / 1e3:.1f} km)" if base in dist else ""), f))
+    return {"dir": d, "vrs": vrs_path, "result": result, "summary": summary, "figures": figures, "dist": dist,
+            "truth": truth}
+
+
+# --- a. real data ----------------------------------------------------------------------------------
+
+
+@pytest.mark.rtklib
+@pytest.mark.shared_data
+def test_rtklib_convbin_reads_the_real_data_vrs(shared_data, tmp_path):
+    convbin = require_tool("convbin")
+    vrs_path = tmp_path / "vrs.obs"
+    result, summary = run_vrs(shared_data / NL, "52.0,4.5,50", vrs_path)
+    assert any("no baseline fixed" in line for line in summary)
+    out_dir = tmp_path / "cb"
+    out_dir.mkdir()
+    p = subprocess.run([convbin, "-r", "rinex", "-v", "3.04", "-od", "-os", "-d", str(out_dir), str(vrs_path)],
+                       capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0, p.stderr
+    theirs = read_obs(out_dir / "vrs.obs")  # RTKLIB's rewrite of our file
+    ours = read_obs(vrs_path)
+    assert len(theirs.times) == len(ours.times) == len(result.epochs) == 19
+    assert np.array_equal(theirs.times, ours.times)
+    for ty in ("C1C", "L1C", "C2W", "L2W"):
+        cols = [list(theirs.sats).index(s) for s in ours.sats]
+        a, b = ours.obs[ty], theirs.obs[ty][:, cols]
+        assert np.array_equal(np.isnan(a), np.isnan(b)), ty
+        assert np.nanmax(np.abs(a - b)) < 1e-3, ty
+
+
+# --- b. simulated network against truth ------------------------------------------------------------
+
+
+@pytest.mark.rtklib
+@pytest.mark.slow
+def test_rtklib_single_point_of_the_vrs_lands_on_its_point(network70):
+    """rnx2rtkp single-point on the VRS file alone: the observations really are those of a receiver at the
+    point (35 km from the master whose observations they were), within the single-point error."""
+    rnx2rtkp = require_tool("rnx2rtkp")
+    out = network70["dir"] / "vrs-spp.pos"
+    subprocess.run([rnx2rtkp, "-p", "0", "-e", "-sys", "G,E,C", "-o", str(out), str(network70["vrs"]),
+                    str(network70["dir"] / "nav.rnx")], check=True, capture_output=True, timeout=120)
+    t, xyz, q = _read_pos(out)
+    point = parse_point(CHECK_POINT)
+    enu = ecef_to_enu(xyz - point, point)
+    h = np.hypot(enu[:, 0], enu[:, 1])
+    print(f"\nVRS single point: {len(t)} epochs, H95 {np.percentile(h, 95):.2f} m, "
+          f"|U|95 {np.percentile(np.abs(enu[:, 2]), 95):.2f} m (no troposphere model in -p 0)")
+    assert len(t) >= 0.95 * EPOCHS
+    assert np.percentile(h, 95) < 3.0
+    assert np.percentile(np.abs(enu[:, 2]), 95) < 20.0
+
+
+@pytest.mark.rtklib
+@pytest.mark.slow
+def test_network_vrs_beats_every_single_base(network70):
+    """The VRS as base fixes check1 without a wrong fix, and gives more RTK-grade epochs (fixed; within 5 cm)
+    than any physical station 35 km away as a single base, none of which fixes at all. (Before its fix the
+    VRS float solution is not better than a single base's: it restarts when the network's corrections
+    arrive and carries about half the satellites; H95 over all epochs is printed, not compared.)"""
+    res, fig = network70["result"], network70["figures"]
+    assert len(res.epochs) == EPOCHS
+    assert res.network_epochs >= 0.8 * EPOCHS  # the network had corrections for most epochs
+    vrs = fig["VRS"]
+    assert vrs["fixed"] >= 0.15 * EPOCHS
+    assert vrs["wrong_fixes"] == 0
+    assert vrs["h95_fixed_m"] < 0.05
+    for base, f in fig.items():
+        if base == "VRS":
+            continue
+        assert f["fixed"] < vrs["fixed"], (base, f)
+        assert f["within_5cm"] < vrs["within_5cm"], (base, f)
+
+
+@pytest.mark.rtklib
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
+    "not met yet (measured 2026-11-22): rnx2rtkp with our VRS fixes 139 of 360 epochs (2 s), 41.5 % after its "
+    "first fix at 50 s, H95 of fixed epochs 2.3 cm (10 min at 1 Hz: 150 of 599, 26 %, 2.4 cm). Causes in the "
+    "engine: VRS DD L1 phase error against truth 2.1 cm RMS (95 %: 4.3 cm), L2 3.1 cm, ratio ~(f1/f2)^2, i.e. "
+    "the interpolated ionosphere; and the VRS carries 16 of ~30 satellites (Galileo: only its reference), "
+    "because the network chains residuals to a station along one path of baselines, and a satellite not "
+    "fixed on that path (EAST-SOUTH: Galileo 0/7 while the other three baselines have 5/7) has none. "
+    "Remove this mark when the network meets the target."))
+def test_must_show_fix_rate_and_accuracy_with_the_vrs(network70):
+    vrs = network70["figures"]["VRS"]
+    assert vrs["fixed"] > 0
+    assert vrs["fix_rate_after_first"] >= TARGET_FIX_RATE
+    assert vrs["h95_after_first_m"] <= TARGET_H95_M
+
+
+@pytest.mark.rtklib
+@pytest.mark.slow
+def test_vrs_rinex_has_the_recordings_signals(network70):
+    """What RTKLIB was given: the VRS header's obs types are the master's signals, the interval 2 s."""
+    data = to_obsdata(network70["result"])
+    assert data.header.interval_s == 1.0 / RATE_HZ
+    assert data.header.obs_types["G"] == ["C1C", "L1C", "S1C", "C2W", "L2W", "S2W"]
+    assert set(data.header.obs_types) >= {"G", "C"}
