@@ -132,3 +132,15 @@ def test_demo_train_track_identity_and_virtual_balises(tmp_path):
         errs.append(err)
     print(f"demo G101: {fixed.sum()}/{len(sols)} fixed, H95 {np.percentile(h, 95) * 100:.2f} cm; balise capture "
           f"errors {', '.join(f'{x * 100:.1f}' for x in errs)} cm")
+
+
+def test_35km_single_base_without_vrs_never_reports_a_wrong_fix(tmp_path):
+    """Beyond the short-baseline model (DD ionosphere of several cm unmodelled) the filter must stay
+    float rather than fix wrongly; fixing there is the centre's VRS's job."""
+    _record("network-70km", 60, tmp_path)
+    sols, true_pos, _ = _run(tmp_path, "NORTH", "check1")
+    err = np.array([np.linalg.norm(s.position_m - p) for s, p in zip(sols, true_pos)])
+    fixed = np.array([s.status == Status.FIX for s in sols])
+    assert not np.any(fixed & (err > WRONG_FIX_M))
+    assert all(s.status in (Status.FIX, Status.FLOAT) for s in sols)
+    assert np.all(err < 2.0)  # float, but a sound float
