@@ -419,7 +419,13 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
             continue
         if vrs is not None:
             vmaster = vrs.master[0]
-            corrected = set(map(str, vrs.sats[vrs.corrected[0]]))
+            # A satellite counts as corrected only if some station besides the network master has a residual
+            # for it: interpolation.interpolate() returns the master's zero when only the master "has" a
+            # satellite, and synthesize() then flags it corrected though no baseline fixed it (seen with
+            # --master = the point's nearest station: all satellites "corrected" from the first epoch).
+            fixed_somewhere = set(map(str, ne.sats[np.isfinite(ne.dd_iono_m[1:]).any(axis=0)])) \
+                if len(ne.stations) > 1 else set()
+            corrected = set(map(str, vrs.sats[vrs.corrected[0]])) & fixed_somewhere
         else:
             vmaster = min(have, key=lambda n: float(np.linalg.norm(stations[n] - point[0])))
             corrected = set()

@@ -278,3 +278,29 @@ def test_summary_states_the_no_fix_case():
     assert "no baseline fixed" in lines and "not used: check1" in lines
     with pytest.raises(PostprocessError, match="no VRS epoch"):
         to_obsdata(res)
+
+
+# --- a recording -----------------------------------------------------------------------------------
+
+
+def test_recording_before_any_fix_is_single_base_whatever_the_master(tmp_path):
+    """The first 20 s of network-70km: no baseline has fixed yet (first fixes come after ~45 s), so no VRS epoch
+    may claim network corrections -- also with the point's nearest station as network master, where the
+    interpolation hands back the master's zero for satellites no baseline fixed. The check receiver is left
+    out as a rover, and the VRS keeps the master's satellites above the point."""
+    from stations.record import record
+    from stations.scenario import load_scenario
+
+    sc = load_scenario("network-70km").model_copy(update={"duration_s": 20})
+    record(sc, tmp_path, rtcm=False)
+    inp = load_network(tmp_path)
+    assert sorted(s.name for s in inp.stations) == ["EAST", "NORTH", "SOUTH", "WEST"]
+    assert inp.excluded == ["check1: check receiver (rover), not a reference station"]
+    point = parse_point("39.5,116.7,35")
+    nearest = min(inp.stations, key=lambda s: np.linalg.norm(s.xyz_m - point)).name
+    res = process(inp, point, master=nearest)
+    assert len(res.epochs) == 20
+    assert res.network_epochs == 0 and set(res.epoch_mode) == {"single-base"}
+    assert all(b.first_fix_t is None for b in res.baselines.values())
+    assert "no baseline fixed: corrections are single-base geometric shifts only" in "\n".join(summary_lines(res))
+    assert min(len(ep.sats) for ep in res.epochs) >= 20
