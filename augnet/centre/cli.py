@@ -13,13 +13,19 @@ app = typer.Typer(no_args_is_help=True, help="The network engine (control centre
 
 
 def vrs(
-    record: Path = typer.Option(..., "--record", help="folder of reference-station RINEX files or a `sim record` output"),
-    at: str = typer.Option(..., "--at", help="the VRS point: LAT,LON,H (degrees, degrees, ellipsoidal m) or X,Y,Z (ECEF m)"),
+    record: Path = typer.Option(..., "--record",
+                                help="folder of reference-station RINEX files or a `sim record` output"),
+    at: str = typer.Option(..., "--at",
+                           help="the VRS point: LAT,LON,H (degrees, degrees, ellipsoidal m) or X,Y,Z (ECEF m)"),
     out: Path = typer.Option(..., "--out", help="virtual RINEX 3.04 observation file to write"),
-    nav: Optional[Path] = typer.Option(None, "--nav", help="broadcast navigation file (default: the folder's, e.g. nav.rnx)"),
-    coords: Optional[Path] = typer.Option(None, "--coords", help="station coordinates: NAME X Y Z or NAME LAT LON H per line"),
-    exclude: Optional[List[str]] = typer.Option(None, "--exclude", help="a station to leave out (a rover); repeatable"),
-    master: Optional[str] = typer.Option(None, "--master", help="network master station (default: the most central)"),
+    nav: Optional[Path] = typer.Option(None, "--nav",
+                                       help="broadcast navigation file (default: the folder's, e.g. nav.rnx)"),
+    coords: Optional[Path] = typer.Option(None, "--coords",
+                                          help="station coordinates: NAME X Y Z or NAME LAT LON H per line"),
+    exclude: Optional[List[str]] = typer.Option(None, "--exclude",
+                                                help="a station to leave out (a rover); repeatable"),
+    master: Optional[str] = typer.Option(None, "--master",
+                                         help="network master station (default: the most central)"),
     name: str = typer.Option("VRS", "--name", help="marker name of the virtual station"),
 ) -> None:
     """Write a virtual reference station RINEX file for a point from a network's observation files."""
