@@ -33,9 +33,9 @@ from stations.scenario import load_scenario
 from tests.conftest import require_tool
 
 NL = "rinex/nl-network-2021"
-# 12 min at 2 s: 360 network epochs, ~0.15-0.55 s CPU each (4 baselines) on the shared 2-core machine, so the
-# module stays within a few minutes; 10 min at 1 Hz measured the same picture at twice the cost (see the
-# xfail reason), 20 min at 5 s a worse one (RTKLIB's first fix only after 8 min).
+# 12 min at 2 s: 360 network epochs at ~0.1-0.5 s CPU each (4 baselines, depending on the load of the shared
+# 2-core machine): 60 s for the module when it is quiet. 10 min at 1 Hz measured the same picture for 600
+# epochs (see the xfail reason); 20 min at 5 s a worse one (RTKLIB's first fix only after 8 min).
 DURATION_S = 720
 RATE_HZ = 0.5
 EPOCHS = int(DURATION_S * RATE_HZ)
