@@ -81,6 +81,10 @@ class BaselineConfig:
     release_epochs: int = 3
     # An arc restarts after a gap longer than this [s].
     max_gap_s: float = 30.0
+    # Time constant of the smoothing of DD residuals [s]: the DD ionosphere from the geometry-free phase
+    # carries ~2x the phase noise (1-2 cm at low elevation) while the ionosphere itself changes by
+    # millimetres per minute over a network baseline; 30 s removes most noise for a few mm of lag.
+    residual_smoothing_s: float = 30.0
 
 
 @dataclass
@@ -145,6 +149,7 @@ class BaselineSolver:
         self.x = np.zeros(2)
         self.P = np.eye(2) * cfg.zwd_prior_sigma_m**2
         self.index: dict[str, int] = {}
+        self._smooth: dict[str, tuple] = {}  # sat -> (ref, integers, t, iono, trop)
 
     @property
     def name(self) -> str:
@@ -302,6 +307,7 @@ class BaselineSolver:
         r = dd - lam * dd_n
         dd_iono = (r[:, 0] - r[:, 1]) / (gamma - 1.0)
         dd_trop = (gamma * r[:, 0] - r[:, 1]) / (gamma - 1.0)
+        dd_iono, dd_trop = self._smoothed(t, sats, ref_of, dd_n, fixed, dd_iono, dd_trop)
         return BaselineEpoch(
             t_gpst=t, refs=dict(self.refs), sats=sats.copy(),
             elevation_a_deg=np.degrees(ga.elevation_rad), elevation_b_deg=np.degrees(gb.elevation_rad),
@@ -310,6 +316,27 @@ class BaselineSolver:
             zwd_m=(float(self.x[0]), float(self.x[1])), ratio=ratio)
 
     # --- pieces of an epoch --------------------------------------------------------------------
+
+    def _smoothed(self, t, sats, ref_of, dd_n, fixed, iono, trop):
+        """Exponential smoothing of each satellite's DD residuals while its reference and integers stay."""
+        tau = self.cfg.residual_smoothing_s
+        out_i, out_t = iono.copy(), trop.copy()
+        for k, s in enumerate(sats):
+            s = str(s)
+            if not fixed[k] or s == ref_of[k] or tau <= 0:
+                self._smooth.pop(s, None)
+                continue
+            key = (ref_of[k], float(dd_n[k, 0]), float(dd_n[k, 1]))
+            prev = self._smooth.get(s)
+            if prev is None or prev[0] != key or t - prev[1] > self.cfg.max_gap_s:
+                si, st = iono[k], trop[k]
+            else:
+                a = min(1.0, (t - prev[1]) / tau)
+                si = prev[2] + a * (iono[k] - prev[2])
+                st = prev[3] + a * (trop[k] - prev[3])
+            self._smooth[s] = (key, t, si, st)
+            out_i[k], out_t[k] = si, st
+        return out_i, out_t
 
     def _detect_slips(self, t, a: StationEpoch, b: StationEpoch, f) -> tuple[set[str], set[str]]:
         gf_a = comb.geometry_free_phase_m(a.phase_cyc[:, 0], a.phase_cyc[:, 1], f[:, 0], f[:, 1])

@@ -144,7 +144,7 @@ def interpolate(station_en: np.ndarray, rover_en: np.ndarray, residuals: np.ndar
     are grouped by which stations have them, and each group gets the weights of its own station subset
     (always including the master, whose residual is zero by definition), with the model re-selected for
     that subset. Returns (corrections, model code per satellite: 0 plane, 1 along-line, 2 distance,
-    -1 none). A satellite the master lacks gets NaN.
+    -1 none). A satellite no station but the master has gets NaN: there is nothing to interpolate.
     """
     en = np.asarray(station_en, dtype=float)
     V = np.asarray(residuals, dtype=float)
@@ -161,8 +161,8 @@ def interpolate(station_en: np.ndarray, rover_en: np.ndarray, residuals: np.ndar
     for p, pattern in enumerate(patterns):
         cols = np.nonzero(inverse.ravel() == p)[0]
         idx = np.nonzero(pattern)[0]
-        if idx.size == 1:  # only the master: its correction (zero) is all there is
-            W, used = np.ones((rov.shape[0], 1)), Model.DISTANCE
+        if idx.size == 1:
+            continue  # only the master has it: nothing to interpolate from (NaN, model -1)
         else:
             sub_master = int(np.nonzero(idx == master)[0][0])
             try:

@@ -135,24 +135,27 @@ class NetworkSolver:
         m = self.order[0]
         iono[m] = 0.0
         trop[m] = 0.0
-        # shortest paths (in metres) from the master over baselines that produced residuals
-        dist = {m: 0.0}
-        heap = [(0.0, m)]
-        while heap:
-            d0, i = heapq.heappop(heap)
-            if d0 > dist.get(i, np.inf):
-                continue
-            for (a, b), vals in per_edge.items():
-                if vals is None or i not in (a, b):
-                    continue
-                j = b if i == a else a
-                sign = 1.0 if i == a else -1.0  # residuals are b minus a
-                nd = d0 + self.solvers[(a, b)].length_m
-                if nd < dist.get(j, np.inf):
-                    dist[j] = nd
-                    iono[j] = iono[i] + sign * vals[0]
-                    trop[j] = trop[i] + sign * vals[1]
-                    heapq.heappush(heap, (nd, j))
+        # Residuals of every station against the master, chained over baselines: per satellite, along the
+        # shortest path (in metres) on which that satellite is fixed on every baseline. Edges are relaxed in
+        # order of length, so a short path wins over a long one; a satellite missing on one baseline
+        # reaches the station over another.
+        edges = sorted((self.solvers[e].length_m, e) for e, v in per_edge.items() if v is not None)
+        dist = np.full((n, len(sats)), np.inf)
+        dist[m] = 0.0
+        for _ in range(n):
+            changed = False
+            for length, (a, b) in edges:
+                vi, vt = per_edge[(a, b)]
+                ok = np.isfinite(vi) & np.isfinite(vt)
+                for src, dst, sign in ((a, b, 1.0), (b, a, -1.0)):  # residuals are b minus a
+                    better = ok & np.isfinite(dist[src]) & (dist[src] + length < dist[dst])
+                    if better.any():
+                        iono[dst, better] = iono[src, better] + sign * vi[better]
+                        trop[dst, better] = trop[src, better] + sign * vt[better]
+                        dist[dst, better] = dist[src, better] + length
+                        changed = True
+            if not changed:
+                break
         rows = self.order
         return NetworkEpoch(
             t_gpst=t, master=self.master, stations=[self.names[i] for i in rows], station_en_m=self.en[rows],

@@ -148,8 +148,11 @@ def synthesize(net: NetworkEpoch, station_epochs: dict[str, StationEpoch], point
         g_v, trop_v, el_v = geometry_many(ep.sats, ep.t_gpst, clk, pts[who], nav)
         # corrections between point and this master: (point - net master) - (this master - net master)
         m_cols = cols_in_net[col]
-        mi = np.where(m_cols >= 0, net.dd_iono_m[mrow][np.maximum(m_cols, 0)], np.nan)
-        mt = np.where(m_cols >= 0, net.dd_trop_m[mrow][np.maximum(m_cols, 0)], np.nan)
+        if len(net.sats):
+            mi = np.where(m_cols >= 0, net.dd_iono_m[mrow][np.maximum(m_cols, 0)], np.nan)
+            mt = np.where(m_cols >= 0, net.dd_trop_m[mrow][np.maximum(m_cols, 0)], np.nan)
+        else:  # no baseline solved this epoch: no corrections at all
+            mi = mt = np.full(len(col), np.nan)
         di = dI[np.ix_(who, col)] - mi
         dt_ = dT[np.ix_(who, col)] - mt
         has = np.isfinite(di) & np.isfinite(dt_)

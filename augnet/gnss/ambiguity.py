@@ -22,6 +22,11 @@ import numpy as np
 # tolerance against round-off looping; Chang et al. 2005 use the same kind of guard).
 _PERMUTE_TOLERANCE = 1e-6
 
+try:  # compiled kernels when numba is there (a dependency); the plain versions otherwise
+    from augnet.gnss import lambda_kernels as _kernels
+except ImportError:  # pragma: no cover
+    _kernels = None
+
 DEFAULT_RATIO_THRESHOLD = 3.0  # RTKLIB's default pos2-arthres; common in commercial engines (2-3)
 DEFAULT_MIN_SUCCESS_RATE = 0.999  # bootstrapped success rate asked of a (partial) fix
 
@@ -55,6 +60,13 @@ def ldl(Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def reduce(L: np.ndarray, D: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """LAMBDA reduction: returns (L', D', Z) with Z unimodular and Z^T Q Z = L'^T diag(D') L'."""
+    if _kernels is not None:
+        return _kernels.reduce_kernel(np.ascontiguousarray(L, dtype=float), np.ascontiguousarray(D, dtype=float))
+    return reduce_reference(L, D)
+
+
+def reduce_reference(L: np.ndarray, D: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The reduction in plain numpy (the reference the compiled kernel is tested against)."""
     L = L.copy()
     D = D.copy()
     n = len(D)
@@ -128,6 +140,19 @@ def _permute(L: np.ndarray, D: np.ndarray, j: int, delta: float, Z: np.ndarray) 
 
 def search(L: np.ndarray, D: np.ndarray, zs: np.ndarray, m: int = 2) -> tuple[np.ndarray, np.ndarray]:
     """MLAMBDA search: the m integer vectors z nearest to zs in the metric (L^T D L)^-1.
+
+    Returns (candidates of shape (m, n), squared norms of shape (m,)), best first.
+    """
+    if _kernels is not None:
+        cand, norms = _kernels.search_kernel(np.ascontiguousarray(L, dtype=float), np.ascontiguousarray(D, dtype=float),
+                                             np.ascontiguousarray(zs, dtype=float), int(m))
+        order = np.argsort(norms, kind="stable")
+        return cand[order], norms[order]
+    return search_reference(L, D, zs, m)
+
+
+def search_reference(L: np.ndarray, D: np.ndarray, zs: np.ndarray, m: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """MLAMBDA search in plain Python (the reference the compiled kernel is tested against).
 
     Returns (candidates of shape (m, n), squared norms of shape (m,)), best first.
     """

@@ -132,3 +132,24 @@ def test_nothing_fixable_gives_none():
 def test_not_positive_definite_is_refused():
     with pytest.raises(AmbiguityError):
         lambda_search(np.zeros(2), np.array([[1.0, 2.0], [2.0, 1.0]]))
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 25))
+def test_compiled_kernels_agree_with_the_reference_python(seed, n):
+    from augnet.gnss import ambiguity as am
+
+    if am._kernels is None:
+        pytest.skip("numba not installed: the reference Python is in use")
+    rng = np.random.default_rng(seed)
+    Q = random_covariance(rng, n, max_cond=1e4)
+    L, D = ldl(Q)
+    L1, D1, Z1 = am._kernels.reduce_kernel(L, D)
+    L2, D2, Z2 = am.reduce_reference(L, D)
+    np.testing.assert_array_equal(Z1, Z2)
+    np.testing.assert_allclose(D1, D2, rtol=1e-9)
+    zs = Z1.T @ rng.normal(scale=30, size=n)
+    c1, s1 = am.search(L1, D1, zs, 3)
+    c2, s2 = am.search_reference(L1, D1, zs, 3)
+    np.testing.assert_array_equal(c1, c2)
+    np.testing.assert_allclose(s1, s2, rtol=1e-12)
