@@ -47,7 +47,6 @@ class Client:
     master: str = ""
     last_arp: float = -np.inf
     last_eph: float = -np.inf
-    eph_sent: dict = field(default_factory=dict)  # sat -> ephemeris row sent
     moved: bool = True
 
 
@@ -55,6 +54,9 @@ class VrsStreamEncoder:
     def __init__(self, msm_level: int = 7):
         self.level = msm_level
         self.clients: dict[str, Client] = {}
+        self._eph_frames: dict[int, bytes] = {}  # ephemeris row -> its framed message (encoded once)
+        self._sat_ids: dict[str, int] = {}
+        self._eph_sent = np.full((0, 0), -1, dtype=np.int64)  # (client row, satellite) -> ephemeris row sent
         self._free_rows: list[int] = []
         # lock state, dense over (client row, satellite-signal key): start time (NaN = not locked) and the
         # whole-cycle phase offset taken at lock start
@@ -77,6 +79,8 @@ class VrsStreamEncoder:
         row = self._free_rows.pop() if self._free_rows else len(self.clients)
         self._grow(row + 1, len(self._keys))
         self._lock_t0[row] = np.nan
+        self._grow_eph(row + 1, len(self._sat_ids))
+        self._eph_sent[row] = -1
         self.clients[client_id] = Client(station_id, np.asarray(point_ecef, float), row)
 
     def move(self, client_id: str, point_ecef) -> None:
@@ -88,6 +92,30 @@ class VrsStreamEncoder:
         c = self.clients.pop(client_id, None)
         if c is not None:
             self._free_rows.append(c.row)
+
+    def _sat_index(self, sat: str) -> int:
+        k = self._sat_ids.get(sat)
+        if k is None:
+            k = self._sat_ids[sat] = len(self._sat_ids)
+        return k
+
+    def _grow_eph(self, rows: int, sats: int) -> None:
+        r0, k0 = self._eph_sent.shape
+        if rows <= r0 and sats <= k0:
+            return
+        grown = np.full((max(rows, 2 * r0, 16), max(sats, 2 * k0, 64)), -1, dtype=np.int64)
+        grown[:r0, :k0] = self._eph_sent
+        self._eph_sent = grown
+
+    def _eph_frame(self, row: int, nav: NavigationData) -> bytes:
+        frame = self._eph_frames.get(row)
+        if frame is None:
+            try:
+                frame = encode_frame(ephemeris_message(nav.table.records[row]))
+            except (ValueError, KeyError):
+                frame = b""
+            self._eph_frames[row] = frame
+        return frame
 
     def _key(self, sat: str, code: str) -> int:
         k = self._keys.get((sat, code))
@@ -101,6 +129,18 @@ class VrsStreamEncoder:
         out = {cid: bytearray() for cid in ids}
         # station and ephemeris messages: per client, only when due (a few per client per minute)
         eph_rows = nav.select(list(vrs.sats), t)
+        if len(self._eph_frames) > 4096:  # a long run: forget frames of old sets
+            self._eph_frames.clear()
+        have_all = np.isfinite(vrs.code_m).any(axis=2)  # (T, S)
+        gsat = np.array([self._sat_index(str(x)) for x in vrs.sats], dtype=int)
+        rows_c = np.array([self.clients[c].row for c in ids], dtype=int)
+        self._grow_eph(rows_c.max(initial=0) + 1, len(self._sat_ids))
+        sent = self._eph_sent[np.ix_(rows_c, gsat)]  # (T, S) ephemeris row each client last had
+        last_eph = np.array([self.clients[c].last_eph for c in ids])
+        periodic = (t - last_eph) >= EPHEMERIS_INTERVAL_S
+        sendable = (eph_rows >= 0) & np.isin(np.array([str(x)[0] for x in vrs.sats]), list("GEC"))
+        due = have_all & sendable[None, :] & (periodic[:, None] | (sent != eph_rows[None, :]))
+        self._eph_sent[np.ix_(rows_c, gsat)] = np.where(due, eph_rows[None, :], sent)
         for i, cid in enumerate(ids):
             c = self.clients[cid]
             if c.master and c.master != vrs.master[i]:
@@ -112,21 +152,12 @@ class VrsStreamEncoder:
                                                             VRS_RECEIVER, FIRMWARE))
                 c.last_arp = t
                 c.moved = False
-            have = np.isfinite(vrs.code_m[i]).any(axis=1)
-            periodic = t - c.last_eph >= EPHEMERIS_INTERVAL_S
-            for k in np.flatnonzero(have):
-                sat = str(vrs.sats[k])
-                row = int(eph_rows[k])
-                if row < 0 or sat[0] not in "GEC":
-                    continue
-                if periodic or c.eph_sent.get(sat) != row:
-                    try:
-                        out[cid] += encode_frame(ephemeris_message(nav.table.records[row]))
-                    except (ValueError, KeyError):
-                        continue
-                    c.eph_sent[sat] = row
-            if periodic:
+            if periodic[i]:
                 c.last_eph = t
+        for i, k in zip(*np.nonzero(due)):
+            frame = self._eph_frame(int(eph_rows[k]), nav)
+            if frame:
+                out[ids[i]] += frame
         # MSM per system, batched over clients
         systems = [s for s in SYSTEM_ORDER if any(str(x).startswith(s) for x in vrs.sats)]
         frames_per_system = []
