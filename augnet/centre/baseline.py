@@ -66,6 +66,10 @@ class BaselineConfig:
     iono_rate_ppm_sqrt_s: float = 0.05
     # Initial SD ambiguity sigma [cycles]: set from code, so a few hundred cycles covers anything.
     amb_prior_sigma_cyc: float = 300.0
+    # Satellites below this elevation stay float (their corrections are not produced): at 10-15 degrees the
+    # code multipath leaves the wide lane uncertain, and near-equivalent integer pairs (Galileo E1/E5a
+    # dN = (3, 4): 6 mm in the ionosphere-free phase, 0.57 m of DD ionosphere) pass the ratio test there.
+    fix_min_elevation_deg: float = 15.0
     # LAMBDA validation and confirmation.
     fix_ratio: float = 2.0
     fix_min_success_rate: float = 0.9999
@@ -117,14 +121,18 @@ class BaselineEpoch:
     slips: list[str] = field(default_factory=list)
     zwd_m: tuple[float, float] = (0.0, 0.0)
     ratio: float = 0.0
+    eligible: np.ndarray | None = None  # (S,) bool: high enough to be fixed (fix_min_elevation_deg)
 
     def is_reference(self) -> np.ndarray:
         return np.isin(self.sats, list(self.refs.values()))
 
     @property
     def fixed_fraction(self) -> float:
-        nonref = ~self.is_reference()
-        return float(self.fixed[nonref].mean()) if nonref.any() else 0.0
+        """Fixed share of the DD ambiguities that may be fixed (satellites above the fixing mask)."""
+        count = ~self.is_reference()
+        if self.eligible is not None:
+            count &= self.eligible
+        return float(self.fixed[count].mean()) if count.any() else 0.0
 
 
 class BaselineSolver:
@@ -292,7 +300,8 @@ class BaselineSolver:
         self._kalman_update(H, z - H @ self.x, R)
         self._hold(sats, rows, ref_k)
         self._release(sats, rows, ref_k, ga, gb, lam, gamma, sd_phase)
-        ratio = self._fix(sats, rows, ref_k)
+        el_min = np.degrees(np.minimum(ga.elevation_rad, gb.elevation_rad))
+        ratio = self._fix(sats, rows[el_min[rows] >= cfg.fix_min_elevation_deg], ref_k)
 
         # DD residuals where the integers are known
         n = len(sats)
@@ -313,7 +322,8 @@ class BaselineSolver:
             elevation_a_deg=np.degrees(ga.elevation_rad), elevation_b_deg=np.degrees(gb.elevation_rad),
             fixed=fixed, dd_n=dd_n, dd_iono_m=np.where(fixed, dd_iono, np.nan),
             dd_trop_m=np.where(fixed, dd_trop, np.nan), freq_hz=f.copy(), slips=sorted(slipped),
-            zwd_m=(float(self.x[0]), float(self.x[1])), ratio=ratio)
+            zwd_m=(float(self.x[0]), float(self.x[1])), ratio=ratio,
+            eligible=el_min >= cfg.fix_min_elevation_deg)
 
     # --- pieces of an epoch --------------------------------------------------------------------
 
