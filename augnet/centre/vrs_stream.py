@@ -160,17 +160,20 @@ class VrsStreamEncoder:
                 out[ids[i]] += frame
         # MSM per system, batched over clients
         systems = [s for s in SYSTEM_ORDER if any(str(x).startswith(s) for x in vrs.sats)]
-        frames_per_system = []
-        for system in systems:
-            frames_per_system.append(self._msm(system, ids, vrs))
-        last = len(frames_per_system) - 1
-        for j, batch in enumerate(frames_per_system):
-            for i, cid in enumerate(ids):
-                out[cid] += batch[j == last][i]
+        batches = []
+        for j, system in enumerate(systems):
+            batches += self._msm(system, ids, vrs, final=j == len(systems) - 1)
+        # each batch holds one frame per client back to back: slice them out by offsets
+        views = [(memoryview(b.data), b.offsets) for b in batches]
+        for i, cid in enumerate(ids):
+            buf = out[cid]
+            for data, off in views:
+                buf += data[off[i]:off[i + 1]]
         return {cid: bytes(b) for cid, b in out.items()}
 
-    def _msm(self, system: str, ids: list[str], vrs: VrsEpoch):
-        """Two encodings of this system's MSM per client: with the multiple-message bit, and without."""
+    def _msm(self, system: str, ids: list[str], vrs: VrsEpoch, final: bool):
+        """This system's MSM for every client, as batches (one per group of satellites when the cells
+        exceed one message); the multiple-message bit is clear only on the epoch's very last message."""
         cols = np.flatnonzero(np.char.startswith(vrs.sats.astype(str), system))
         sats = vrs.sats[cols]
         prn = np.array([int(s[1:]) for s in sats])
@@ -217,13 +220,9 @@ class VrsStreamEncoder:
             groups = np.array_split(np.arange(nsat), int(np.ceil(per_client / MSM_MAX_CELLS)))
         else:
             groups = [np.arange(nsat)]
-        encoded = {}
-        for final in (False, True):
-            parts = []
-            for g_i, g in enumerate(groups):
-                multiple = 0 if (final and g_i == len(groups) - 1) else 1
-                parts.append(encode_msm_batch(system, self.level, prn[g], sig_ids, station_ids, epoch,
-                                              pr[:, g], cp[:, g], None, cnr[:, g], lock_ms[:, g],
-                                              multiple=multiple))
-            encoded[final] = [b"".join(p[i] for p in parts) for i in range(T)]
-        return encoded
+        parts = []
+        for g_i, g in enumerate(groups):
+            multiple = 0 if (final and g_i == len(groups) - 1) else 1
+            parts.append(encode_msm_batch(system, self.level, prn[g], sig_ids, station_ids, epoch,
+                                          pr[:, g], cp[:, g], None, cnr[:, g], lock_ms[:, g], multiple=multiple))
+        return parts
