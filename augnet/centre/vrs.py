@@ -72,34 +72,38 @@ class VrsEpoch:
                             self.lli[i][keep], self.cnr_dbhz[i][keep], self.freq_hz[keep], self.codes[keep])
 
 
-def geometry_many(sats, t_tag: float, clock_s: float, points_ecef_m: np.ndarray, nav: NavigationData):
+def geometry_many(sats, t_tag: float, clock_s, points_ecef_m: np.ndarray, nav: NavigationData):
     """g = rho - c dts, troposphere model and elevation at many points (T, S) for one epoch tag.
 
     The satellite states are computed once, at the transmission time for a reference point (the points'
     centre), and carried to each point's own transmission time with the satellite velocity and clock drift:
     transmission times differ by under a millisecond across a network (300 km), over which the linear
     carry is exact to a micrometre (satellite acceleration ~0.6 m/s^2). This keeps thousands of points to
-    one orbit evaluation per satellite."""
+    one orbit evaluation per satellite. `clock_s`: the receiver clock offset, one for all points or one
+    per point (a VRS takes its master's)."""
     pts = np.atleast_2d(np.asarray(points_ecef_m, float))
-    t_rx = t_tag - clock_s
-    tr = transit(nav, list(sats), pts.mean(axis=0), t_rx)
-    tau0 = t_rx - tr.transmit_time_gpst  # (S,)
+    clk = np.broadcast_to(np.asarray(clock_s, float), (len(pts),))
+    t_rx0 = t_tag - float(np.median(clk))
+    d_rx = (t_tag - clk) - t_rx0  # (T,) each point's reception time against the reference one
+    tr = transit(nav, list(sats), pts.mean(axis=0), t_rx0)
+    tau0 = t_rx0 - tr.transmit_time_gpst  # (S,)
     omega = np.array([OMEGA_E_BDS_RAD_S if str(s)[0] == "C" else OMEGA_E_GPS_RAD_S for s in sats])
     tau = np.broadcast_to(tau0, (len(pts), len(tau0))).copy()
     for _ in range(TRANSIT_CARRY_ITERATIONS):
-        xs = tr.sat_position_m[None] - tr.sat_velocity_m_s[None] * (tau - tau0)[..., None]
+        dt_tx = d_rx[:, None] - (tau - tau0)  # transmission time against the reference one
+        xs = tr.sat_position_m[None] + tr.sat_velocity_m_s[None] * dt_tx[..., None]
         ang = omega * tau
         ca, sa = np.cos(ang), np.sin(ang)
         rot = np.stack((xs[..., 0] * ca + xs[..., 1] * sa, -xs[..., 0] * sa + xs[..., 1] * ca, xs[..., 2]), axis=-1)
         rng = np.linalg.norm(rot - pts[:, None, :], axis=-1)
         tau = rng / C
-    clk = tr.sat_clock_bias_s[None] - tr.sat_clock_drift_s_s[None] * (tau - tau0)
+    dts = tr.sat_clock_bias_s[None] + tr.sat_clock_drift_s_s[None] * (d_rx[:, None] - (tau - tau0))
     _, el = azimuth_elevation(pts[:, None, :], rot)
     llh = ecef_to_geodetic(pts)
     doy = to_datetime(t_tag).timetuple().tm_yday
     el_c = np.clip(np.where(np.isfinite(el), el, np.pi / 2), MIN_MODEL_ELEVATION_RAD, None)
     trop = troposphere.slant_delay_m(el_c, llh[:, 0:1], llh[:, 2:3], doy)
-    return rng - C * clk, trop, el
+    return rng - C * dts, trop, el
 
 
 def synthesize(net: NetworkEpoch, station_epochs: dict[str, StationEpoch], points_ecef_m,
@@ -157,15 +161,22 @@ def synthesize(net: NetworkEpoch, station_epochs: dict[str, StationEpoch], point
             dT[np.ix_(who, np.flatnonzero(ok))] = (ct + base_t)[:, cols_in_net[ok]]
             model[np.ix_(who, np.flatnonzero(ok))] = mi[cols_in_net[ok]]
     dist = d[np.arange(T), np.searchsorted(present, master_idx)] if T else np.zeros(0)
-    for mrow in sorted(set(master_idx.tolist())):
+    masters = sorted(set(master_idx.tolist()))
+    # one geometry computation for every master and every point (each at its master's receiver clock)
+    t_tag = float(station_epochs[net.stations[masters[0]]].t_gpst)
+    all_pts = np.vstack([xyz[masters], pts])
+    all_clk = np.array([clocks.get(net.stations[m], 0.0) for m in masters]
+                       + [clocks.get(net.stations[m], 0.0) for m in master_idx])
+    G, TROP, EL = geometry_many(sats, t_tag, all_clk, all_pts, nav)
+    for m_i, mrow in enumerate(masters):
         name = net.stations[mrow]
         ep = station_epochs[name]
         ep = ep.subset(~np.isin(ep.sats, list(net.excluded))) if net.excluded else ep
         who = np.flatnonzero(master_idx == mrow)
         col = np.searchsorted(sats, ep.sats)
-        clk = clocks.get(name, 0.0)
-        g_m, trop_m, _ = geometry_many(ep.sats, ep.t_gpst, clk, xyz[mrow], nav)
-        g_v, trop_v, el_v = geometry_many(ep.sats, ep.t_gpst, clk, pts[who], nav)
+        g_m, trop_m = G[m_i, col][None], TROP[m_i, col][None]
+        rows_v = len(masters) + who
+        g_v, trop_v, el_v = G[np.ix_(rows_v, col)], TROP[np.ix_(rows_v, col)], EL[np.ix_(rows_v, col)]
         # corrections between point and this master: (point - net master) - (this master - net master)
         m_cols = cols_in_net[col]
         if len(net.sats):
