@@ -78,7 +78,6 @@ class StationDecoder:
                         self.arp_ecef = np.array([float(f["DF025"]), float(f["DF026"]), float(f["DF027"])])
             except (ValueError, KeyError, IndexError):
                 self.stats.undecodable += 1
-        self.stats.undecodable = max(self.stats.undecodable, 0)
         return done
 
     def flush(self) -> list[StationEpoch]:

@@ -152,10 +152,11 @@ def synthesize(net: NetworkEpoch, station_epochs: dict[str, StationEpoch], point
             sub_master = int(np.argmin([np.linalg.norm(net.station_en_m[r]) for r in rows]))
             base_i = net.dd_iono_m[rows[sub_master]]
             base_t = net.dd_trop_m[rows[sub_master]]
-            ci, mi = interpolation.interpolate(net.station_en_m[rows], rover_en[who],
-                                               net.dd_iono_m[rows] - base_i, master=sub_master)
-            ct, _ = interpolation.interpolate(net.station_en_m[rows], rover_en[who],
-                                              net.dd_trop_m[rows] - base_t, master=sub_master)
+            # ionosphere and troposphere side by side: the same stations have both, so one set of weights
+            nsat = base_i.shape[0]
+            both = np.hstack([net.dd_iono_m[rows] - base_i, net.dd_trop_m[rows] - base_t])
+            c_both, m_both = interpolation.interpolate(net.station_en_m[rows], rover_en[who], both, master=sub_master)
+            ci, ct, mi = c_both[:, :nsat], c_both[:, nsat:], m_both[:nsat]
             ok = cols_in_net >= 0
             dI[np.ix_(who, np.flatnonzero(ok))] = (ci + base_i)[:, cols_in_net[ok]]
             dT[np.ix_(who, np.flatnonzero(ok))] = (ct + base_t)[:, cols_in_net[ok]]

@@ -227,9 +227,8 @@ def test_network_vrs_beats_every_single_base(network70):
     "not met yet (measured 2026-11-22): rnx2rtkp with our VRS fixes 139 of 360 epochs (2 s), 41.5 % after its "
     "first fix at 50 s, H95 of fixed epochs 2.3 cm (10 min at 1 Hz: 150 of 599, 26 %, 2.4 cm). Causes in the "
     "engine: VRS DD L1 phase error against truth 2.1 cm RMS (95 %: 4.3 cm), L2 3.1 cm, ratio ~(f1/f2)^2, i.e. "
-    "the interpolated ionosphere; and the VRS carries 16 of ~30 satellites (Galileo: only its reference), "
-    "because the network chains residuals to a station along one path of baselines, and a satellite not "
-    "fixed on that path (EAST-SOUTH: Galileo 0/7 while the other three baselines have 5/7) has none. "
+    "the interpolated ionosphere (3.0 cm RMS DD at 35 km; 2.8 cm even from truth station residuals: the quiet "
+    "preset's medium-scale structure), and satellites below 15 degrees carry no corrections. "
     "Remove this mark when the network meets the target."))
 def test_must_show_fix_rate_and_accuracy_with_the_vrs(network70):
     vrs = network70["figures"]["VRS"]
