@@ -26,6 +26,8 @@ SUBAPPS = (
     ("vrs", "augnet.centre.cli", "vrs", "Write a virtual reference station RINEX file for a point."),
     ("centre", "augnet.centre.cli", "app", "The network engine (control centre)."),
     ("console", "augnet.console.cli", "app", "The operator console."),
+    ("scenario", "augnet.scenario.cli", "app", "Run a scenario end to end, faster than real time: report.json + plots."),
+    ("up", "augnet.system.cli", "up", "The whole system in one process: stations, caster, centre, RSSP-I, trains, console."),
 )
 
 
