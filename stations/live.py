@@ -35,6 +35,7 @@ CONNECT_TIMEOUT_S = 10.0
 RESPONSE_TIMEOUT_S = 10.0
 QUEUE_EPOCHS = 5  # at most this many epochs wait for a slow link; older ones are dropped
 LIVE_BLOCK_EPOCHS = 5  # simulate a few epochs ahead of the wall clock
+LATE_EPOCH_S = 1.0  # live: an epoch this far behind its GPS time is dropped, not sent late
 
 
 class SourceRefused(Exception):
@@ -197,12 +198,19 @@ def live_scenario(sc: Scenario) -> Scenario:
 
 async def run_stations(sc: Scenario, host: str, port: int, *, user: str = "", password: str = "",
                        speed: float = 1.0, start_now: bool = True, stop: asyncio.Event | None = None,
-                       on_ready=None) -> dict[str, SourceStats]:
-    """Stream the scenario's receivers to the caster until the scenario ends (or `stop` is set)."""
-    if start_now:
+                       on_ready=None, world: World | None = None, on_block=None) -> dict[str, SourceStats]:
+    """Stream the scenario's receivers to the caster until the scenario ends (or `stop` is set).
+
+    `world`: an already built World of the (live) scenario, shared with the caller (which then owns the
+    start time); `on_block(blk)`: called with every simulated block before its epochs leave (truth for
+    the caller's statistics)."""
+    world_given = world is not None
+    if world is not None:
+        sc = world.scenario
+    elif start_now:
         sc = live_scenario(sc)
     stop = stop or asyncio.Event()
-    world = World(sc)
+    world = world or World(sc)
     streams = RtcmStreams(world)
     streams.keep_epochs = True
     conns = {rx.id: SourceConnection(host, port, mountpoint_of(rx.kind, rx.id), user, password, i)
@@ -216,13 +224,28 @@ async def run_stations(sc: Scenario, host: str, port: int, *, user: str = "", pa
         await asyncio.wait_for(asyncio.gather(*(c.connected.wait() for c in conns.values())), 2.0)
     except asyncio.TimeoutError:
         pass
-    wall0 = loop.time()
+    # Real time: each epoch leaves at its own GPS time (the scenario started "now", but building the
+    # world and connecting took a moment); epochs already more than LATE_EPOCH_S in the past are
+    # dropped rather than sent late. Faster than real time: relative to the first epoch.
+    on_gps_clock = speed == 1.0 and (start_now or world_given)
+    wall0, gps0 = loop.time(), gtime.now_gpst()
+    if not on_gps_clock:
+        gps0 = world.t0
     try:
         for blk in world.epochs(LIVE_BLOCK_EPOCHS):
             streams.add(blk)
+            if on_block is not None:
+                on_block(blk)
             for e, t in enumerate(blk.t_gpst):
-                due = wall0 + (float(t) - world.t0) / speed
+                due = wall0 + (float(t) - gps0) / speed
                 delay = due - loop.time()
+                if on_gps_clock and delay < -LATE_EPOCH_S:
+                    for c in conns.values():
+                        c.stats.epochs_dropped += 1
+                    for pending in streams.epoch_bytes.values():
+                        while pending and pending[0][0] <= float(t) + 1e-6:
+                            pending.pop(0)
+                    continue
                 if delay > 0:
                     try:
                         await asyncio.wait_for(stop.wait(), delay)
