@@ -7,7 +7,7 @@ import datetime as dt
 import hashlib
 import secrets
 
-from sqlalchemy import select
+from sqlalchemy import delete, func, select
 from sqlalchemy.orm import Session
 
 from augnet.store.models import (
@@ -15,11 +15,15 @@ from augnet.store.models import (
     AlarmState,
     ApiToken,
     AuditEntry,
+    CasterUser,
+    Mountpoint,
     Operator,
     QualitySample,
     Role,
     Severity,
     Station,
+    Train,
+    TrainSession,
     utcnow,
 )
 
@@ -181,3 +185,157 @@ def quality_history(session: Session, subject: str | None = None, since: dt.date
 
 def audit_log(session: Session, limit: int = 200) -> list[AuditEntry]:
     return list(session.scalars(select(AuditEntry).order_by(AuditEntry.id.desc()).limit(limit)))
+
+
+# --- console: alarms, operators, tokens -------------------------------------------------------------
+
+def get_alarm(session: Session, alarm_id: int) -> Alarm:
+    alarm = session.get(Alarm, alarm_id)
+    if alarm is None:
+        raise NotFound(f"no alarm {alarm_id}")
+    return alarm
+
+
+def open_alarm_counts(session: Session) -> dict[tuple[str, str], int]:
+    """Alarms not cleared, counted by (state, severity)."""
+    rows = session.execute(select(Alarm.state, Alarm.severity, func.count()).where(
+        Alarm.state != AlarmState.CLEARED).group_by(Alarm.state, Alarm.severity))
+    return {(state.value, sev.value): n for state, sev, n in rows}
+
+
+def operator_count(session: Session) -> int:
+    return session.scalar(select(func.count()).select_from(Operator)) or 0
+
+
+def get_operator(session: Session, name: str) -> Operator:
+    op = session.scalar(select(Operator).where(Operator.name == name))
+    if op is None:
+        raise NotFound(f"no operator {name}")
+    return op
+
+
+def list_operators(session: Session) -> list[Operator]:
+    return list(session.scalars(select(Operator).order_by(Operator.name)))
+
+
+def update_operator(session: Session, actor: str, name: str, *, role: Role | None = None,
+                    enabled: bool | None = None, password_hash: str | None = None) -> Operator:
+    """Change an operator's role, enabled flag or password. Disabling or a new password revokes every
+    token the operator holds."""
+    op = get_operator(session, name)
+    detail: dict = {}
+    if role is not None and role is not op.role:
+        detail["role"] = {"before": op.role.value, "after": role.value}
+        op.role = role
+    if enabled is not None and enabled != op.enabled:
+        detail["enabled"] = {"before": op.enabled, "after": enabled}
+        op.enabled = enabled
+    if password_hash is not None:
+        op.password_hash = password_hash
+        detail["password"] = "changed"
+    if detail.get("enabled", {}).get("after") is False or password_hash is not None:
+        session.execute(delete(ApiToken).where(ApiToken.operator_id == op.id))
+        detail["tokens_revoked"] = True
+    audit(session, actor, "operator.edit", name, **detail)
+    return op
+
+
+def revoke_token(session: Session, actor: str, token: str) -> bool:
+    """Forget one API token (logout). True when it existed."""
+    digest = hashlib.sha256(token.encode()).hexdigest()
+    row = session.scalar(select(ApiToken).where(ApiToken.token_sha256 == digest))
+    if row is None:
+        return False
+    session.delete(row)
+    audit(session, actor, "token.revoke", row.operator.name)
+    return True
+
+
+# --- console: caster users and mountpoints ----------------------------------------------------------
+
+def list_caster_users(session: Session) -> list[CasterUser]:
+    return list(session.scalars(select(CasterUser).order_by(CasterUser.name)))
+
+
+def get_caster_user(session: Session, name: str) -> CasterUser:
+    user = session.scalar(select(CasterUser).where(CasterUser.name == name))
+    if user is None:
+        raise NotFound(f"no caster user {name}")
+    return user
+
+
+def add_caster_user(session: Session, actor: str, name: str, password_hash: str, groups: str = "") -> CasterUser:
+    if session.scalar(select(CasterUser).where(CasterUser.name == name)) is not None:
+        raise Conflict(f"caster user {name} exists")
+    user = CasterUser(name=name, password_hash=password_hash, groups=groups)
+    session.add(user)
+    audit(session, actor, "caster_user.add", name, groups=groups)
+    return user
+
+
+def update_caster_user(session: Session, actor: str, name: str, *, groups: str | None = None,
+                       enabled: bool | None = None, password_hash: str | None = None) -> CasterUser:
+    user = get_caster_user(session, name)
+    detail: dict = {}
+    if groups is not None and groups != user.groups:
+        detail["groups"] = {"before": user.groups, "after": groups}
+        user.groups = groups
+    if enabled is not None and enabled != user.enabled:
+        detail["enabled"] = {"before": user.enabled, "after": enabled}
+        user.enabled = enabled
+    if password_hash is not None:
+        user.password_hash = password_hash
+        detail["password"] = "changed"
+    audit(session, actor, "caster_user.edit", name, **detail)
+    return user
+
+
+def delete_caster_user(session: Session, actor: str, name: str) -> None:
+    session.delete(get_caster_user(session, name))
+    audit(session, actor, "caster_user.delete", name)
+
+
+def list_mountpoints(session: Session) -> list[Mountpoint]:
+    return list(session.scalars(select(Mountpoint).order_by(Mountpoint.name)))
+
+
+def get_mountpoint(session: Session, name: str) -> Mountpoint:
+    mp = session.scalar(select(Mountpoint).where(Mountpoint.name == name))
+    if mp is None:
+        raise NotFound(f"no mountpoint {name}")
+    return mp
+
+
+def add_mountpoint(session: Session, actor: str, name: str, kind: str, format: str = "RTCM 3.3",
+                   read_groups: str = "", write_groups: str = "") -> Mountpoint:
+    if session.scalar(select(Mountpoint).where(Mountpoint.name == name)) is not None:
+        raise Conflict(f"mountpoint {name} exists")
+    mp = Mountpoint(name=name, kind=kind, format=format, read_groups=read_groups, write_groups=write_groups)
+    session.add(mp)
+    audit(session, actor, "mountpoint.add", name, kind=kind, read_groups=read_groups, write_groups=write_groups)
+    return mp
+
+
+def update_mountpoint(session: Session, actor: str, name: str, **changes) -> Mountpoint:
+    mp = get_mountpoint(session, name)
+    allowed = {"kind", "format", "read_groups", "write_groups", "enabled"}
+    unknown = set(changes) - allowed
+    if unknown:
+        raise ValueError(f"cannot change {sorted(unknown)} of a mountpoint")
+    before = {k: getattr(mp, k) for k in changes}
+    for k, v in changes.items():
+        setattr(mp, k, v)
+    audit(session, actor, "mountpoint.edit", name, before=before, after=changes)
+    return mp
+
+
+# --- console: trains --------------------------------------------------------------------------------
+
+def list_trains(session: Session) -> list[Train]:
+    return list(session.scalars(select(Train).order_by(Train.code)))
+
+
+def train_sessions(session: Session, code: str, limit: int = 50) -> list[TrainSession]:
+    """A train's most recent correction-service sessions, newest first (empty for an unknown train)."""
+    return list(session.scalars(select(TrainSession).join(Train).where(Train.code == code)
+                                .order_by(TrainSession.started_at.desc(), TrainSession.id.desc()).limit(limit)))

@@ -1,0 +1,151 @@
+"""The NTRIP caster: its counters, mountpoints (the store's configuration merged with live statistics),
+connected clients, and caster users (admins manage them; password hashes never leave the store)."""
+
+from __future__ import annotations
+
+import logging
+
+from fastapi import APIRouter, Response, status
+
+from augnet.console.deps import DB, Admin, Live, Viewer, field_error
+from augnet.console.live import LiveState
+from augnet.console.schemas import (
+    CasterOut,
+    CasterUserIn,
+    CasterUserOut,
+    CasterUserPatch,
+    MountpointIn,
+    MountpointOut,
+    MountpointPatch,
+)
+from augnet.console.security import hash_password
+from augnet.store import queries as q
+from augnet.store.models import CasterUser, Mountpoint
+
+router = APIRouter(prefix="/caster", tags=["caster"])
+log = logging.getLogger(__name__)
+
+
+def _snapshot(live: LiveState) -> dict | None:
+    return live.caster()
+
+
+def _tell_system(live: LiveState, kind: str, name: str, change: dict) -> None:
+    hook = live.on_caster_change
+    if hook is None:
+        return
+    try:
+        hook(kind, name, dict(change))
+    except Exception:
+        log.exception("caster change hook failed for %s %s", kind, name)
+
+
+@router.get("", response_model=CasterOut)
+def caster(who: Viewer, live: Live) -> CasterOut:
+    snap = _snapshot(live)
+    if snap is None:
+        return CasterOut(running=False)
+    return CasterOut(running=True, started_at=snap.get("started_at"), port=snap.get("port"),
+                     clients_now=snap.get("clients_now", 0), connections_now=snap.get("connections_now", 0),
+                     counters=snap.get("counters", {}), mountpoints_live=len(snap.get("mounts") or {}))
+
+
+def _mount_out(mp: Mountpoint | None, name: str, stats: dict | None) -> MountpointOut:
+    if mp is None:
+        return MountpointOut(name=name, kind=(stats or {}).get("kind", "source"), format=None, read_groups=None,
+                             write_groups=None, enabled=True, in_store=False, stats=stats)
+    return MountpointOut(name=mp.name, kind=mp.kind, format=mp.format, read_groups=mp.read_groups,
+                         write_groups=mp.write_groups, enabled=mp.enabled, in_store=True, stats=stats)
+
+
+@router.get("/mountpoints", response_model=list[MountpointOut])
+def mountpoints(who: Viewer, session: DB, live: Live) -> list[MountpointOut]:
+    snap = _snapshot(live)
+    mounts = dict((snap or {}).get("mounts") or {})
+    out = [_mount_out(mp, mp.name, mounts.pop(mp.name, None)) for mp in q.list_mountpoints(session)]
+    out += [_mount_out(None, name, stats) for name, stats in sorted(mounts.items())]
+    return out
+
+
+@router.post("/mountpoints", response_model=MountpointOut, status_code=status.HTTP_201_CREATED,
+             responses={409: {"description": "name taken"}})
+def add_mountpoint(body: MountpointIn, who: Admin, session: DB, live: Live) -> MountpointOut:
+    mp = q.add_mountpoint(session, who.name, body.name, body.kind, body.format, body.read_groups, body.write_groups)
+    session.commit()
+    _tell_system(live, "mountpoint", mp.name, {"action": "add", **body.model_dump()})
+    return _mount_out(mp, mp.name, None)
+
+
+@router.patch("/mountpoints/{name}", response_model=MountpointOut, responses={404: {"description": "no such mountpoint"}})
+def edit_mountpoint(name: str, body: MountpointPatch, who: Admin, session: DB, live: Live) -> MountpointOut:
+    given = body.model_dump(exclude_unset=True)
+    if not given:
+        raise field_error("kind", "give at least one field to change")
+    for field, value in given.items():
+        if value is None:
+            raise field_error(field, "may not be null")
+    mp = q.update_mountpoint(session, who.name, name, **given)
+    session.commit()
+    _tell_system(live, "mountpoint", name, {"action": "edit", **given})
+    return _mount_out(mp, name, None)
+
+
+@router.get("/clients", response_model=list[dict])
+def clients(who: Viewer, live: Live) -> list[dict]:
+    """Connected NTRIP clients as the caster reports them (id, ip, user, mount, version, bytes out, last GGA
+    position, serving base); empty when no caster runs in this process."""
+    snap = _snapshot(live)
+    return list((snap or {}).get("clients") or [])
+
+
+def _user_out(u: CasterUser, counts: dict[str, int]) -> CasterUserOut:
+    return CasterUserOut(name=u.name, groups=u.groups, enabled=u.enabled, connected_clients=counts.get(u.name, 0))
+
+
+def _client_counts(live: LiveState) -> dict[str, int]:
+    counts: dict[str, int] = {}
+    for c in (_snapshot(live) or {}).get("clients") or []:
+        if c.get("user"):
+            counts[c["user"]] = counts.get(c["user"], 0) + 1
+    return counts
+
+
+@router.get("/users", response_model=list[CasterUserOut])
+def users(who: Viewer, session: DB, live: Live) -> list[CasterUserOut]:
+    counts = _client_counts(live)
+    return [_user_out(u, counts) for u in q.list_caster_users(session)]
+
+
+@router.post("/users", response_model=CasterUserOut, status_code=status.HTTP_201_CREATED,
+             responses={409: {"description": "name taken"}})
+def add_user(body: CasterUserIn, who: Admin, session: DB, live: Live) -> CasterUserOut:
+    u = q.add_caster_user(session, who.name, body.name, hash_password(body.password), body.groups)
+    session.commit()
+    _tell_system(live, "user", u.name, {"action": "add", "groups": u.groups, "password_hash": u.password_hash})
+    return _user_out(u, {})
+
+
+@router.patch("/users/{name}", response_model=CasterUserOut, responses={404: {"description": "no such user"}})
+def edit_user(name: str, body: CasterUserPatch, who: Admin, session: DB, live: Live) -> CasterUserOut:
+    given = body.model_dump(exclude_unset=True)
+    if not given:
+        raise field_error("groups", "give at least one field to change")
+    for field, value in given.items():
+        if value is None:
+            raise field_error(field, "may not be null")
+    pw = given.get("password")
+    u = q.update_caster_user(session, who.name, name, groups=given.get("groups"), enabled=given.get("enabled"),
+                             password_hash=None if pw is None else hash_password(pw))
+    session.commit()
+    _tell_system(live, "user", name, {"action": "edit", "groups": u.groups, "enabled": u.enabled,
+                                      "password_hash": u.password_hash})
+    return _user_out(u, _client_counts(live))
+
+
+@router.delete("/users/{name}", status_code=status.HTTP_204_NO_CONTENT,
+               responses={404: {"description": "no such user"}})
+def delete_user(name: str, who: Admin, session: DB, live: Live) -> Response:
+    q.delete_caster_user(session, who.name, name)
+    session.commit()
+    _tell_system(live, "user", name, {"action": "delete"})
+    return Response(status_code=status.HTTP_204_NO_CONTENT)

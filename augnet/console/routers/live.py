@@ -1,0 +1,71 @@
+"""The live feed: a websocket of events (with a snapshot first), and the same snapshot over plain HTTP for
+pages that cannot keep a websocket open (the page falls back to polling it)."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+
+from fastapi import APIRouter, WebSocket, WebSocketDisconnect
+from starlette.concurrency import run_in_threadpool
+
+from augnet.console.deps import Live, Viewer, principal_for_token
+
+router = APIRouter(tags=["live"])
+log = logging.getLogger(__name__)
+
+# Websocket close codes 4000-4999 are the application's (RFC 6455 7.4.2); 4401/4403 mirror HTTP's.
+WS_UNAUTHORIZED = 4401
+MAX_EVENTS_PER_MESSAGE = 500  # a burst is sent as one message of up to this many events
+
+
+@router.get("/live/snapshot")
+def snapshot(who: Viewer, live: Live) -> dict:
+    """Stations, baselines, trains, network summary and line, as the websocket's first message."""
+    return live.snapshot()
+
+
+def _check_token(app, token: str | None):
+    with app.state.sessions() as session:
+        return principal_for_token(session, token)
+
+
+@router.websocket("/live")
+async def live_feed(ws: WebSocket, token: str | None = None) -> None:
+    """Events as JSON messages `{"events": [...]}`; the first carries one event of type "snapshot".
+    The token comes as the `token` query parameter (browsers cannot set headers on a websocket);
+    without a valid one the socket is closed with code 4401."""
+    await ws.accept()
+    who = await run_in_threadpool(_check_token, ws.app, token)
+    if who is None:
+        await ws.close(code=WS_UNAUTHORIZED, reason="invalid or missing token")
+        return
+    live = ws.app.state.live
+    queue = live.subscribe()
+
+    async def pump() -> None:
+        await ws.send_json({"events": [live.snapshot()]})
+        while True:
+            events = [await queue.get()]
+            while len(events) < MAX_EVENTS_PER_MESSAGE:
+                try:
+                    events.append(queue.get_nowait())
+                except asyncio.QueueEmpty:
+                    break
+            await ws.send_json({"events": events})
+
+    async def watch() -> None:  # client messages are ignored; this notices the client leaving
+        while (await ws.receive())["type"] != "websocket.disconnect":
+            pass
+
+    tasks = [asyncio.ensure_future(pump()), asyncio.ensure_future(watch())]
+    try:
+        done, pending = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
+        for task in done:
+            exc = task.exception()
+            if exc is not None and not isinstance(exc, (WebSocketDisconnect, RuntimeError, OSError)):
+                log.warning("live feed ended: %r", exc)
+    finally:
+        for task in tasks:
+            task.cancel()
+        live.unsubscribe(queue)
