@@ -11,19 +11,19 @@ DATAVER_i. From there it predicts T_i(TC) for every later RSD.
 
 from __future__ import annotations
 
-from rssp1.crc import crc32_pair
+from rssp1 import crc as _crc  # looked up per call: rssp1.crc.use_backend() switches backends
 
 SYS_CHK_WD = (0xAE390B5A, 0xC103589C)  # identical in all three vendor implementations (rssp1.md)
 
 
 def svc(data: bytes, sid: tuple[int, int], t: tuple[int, int]) -> tuple[int, int]:
-    c1, c2 = crc32_pair(data)
+    c1, c2 = _crc.crc32_pair(data)
     return c1 ^ sid[0] ^ t[0] ^ SYS_CHK_WD[0], c2 ^ sid[1] ^ t[1] ^ SYS_CHK_WD[1]
 
 
 def timestamp_from_svc(svc_words: tuple[int, int], data: bytes, sid: tuple[int, int]) -> tuple[int, int]:
     """The T(TC) a frame claims, given its sender's SID: what a receiver compares with its prediction."""
-    c1, c2 = crc32_pair(data)
+    c1, c2 = _crc.crc32_pair(data)
     return svc_words[0] ^ c1 ^ sid[0] ^ SYS_CHK_WD[0], svc_words[1] ^ c2 ^ sid[1] ^ SYS_CHK_WD[1]
 
 

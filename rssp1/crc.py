@@ -8,13 +8,25 @@ Parameters (rssp1.md, checked against 970 captured frames and the check values b
   bit-reversed, then the reflected algorithm (with the bit-reversed polynomial) runs, init 0, no final
   XOR. Check values of b"123456789": 0x65A297AC and 0xC12BAA78.
 
-Speed: pure Python, so the loops eat 32 bits per iteration (two lookups in 65,536-entry tables, two
-tables per code, built once at import in a fraction of a second; about 2.5 MB per table). Interpreted
-iterations are where the time goes: a quarter of a byte-at-a-time loop's. See augnet/bench/rssp1.py.
+Two implementations of the same functions:
+
+- the reference, pure Python (`crc16_py`, `crc32_pair_py`): the loops eat 32 bits per iteration (two
+  lookups in 65,536-entry tables, two tables per code, built once at import in a fraction of a
+  second; about 2.5 MB per table). Interpreted iterations are where the time goes: a quarter of a
+  byte-at-a-time loop's;
+- compiled (rssp1._compiled, numba, optional): byte-at-a-time kernels, about 0.25 us a call, most
+  of it the call itself.
+
+`crc16`, `crc32_pair`, `crc32_ch1`, `crc32_ch2` are whichever backend is selected: "numba" when numba
+imports, else "python"; the environment variable RSSP1_BACKEND=python forces the reference (and
+RSSP1_BACKEND=numba makes a missing numba an error). `use_backend()` switches at run time (the
+benchmark measures both in one process). tests/rssp1/test_fast_paths.py checks both backends agree.
+See augnet/bench/rssp1.py for the figures.
 """
 
 from __future__ import annotations
 
+import os
 import struct
 
 CRC16_POLY_REFLECTED = 0x8810  # normal form 0x0811; rssp1.md "Codes"
@@ -99,8 +111,8 @@ def _words32(data: bytes | memoryview, n_words: int) -> tuple[int, ...]:
     return fmt.unpack_from(data, 0)
 
 
-def crc16(data: bytes | bytearray | memoryview) -> int:
-    """RSSP-I CRC16 (reflected 0x8810, init 0, no final XOR)."""
+def crc16_py(data: bytes | bytearray | memoryview) -> int:
+    """RSSP-I CRC16 (reflected 0x8810, init 0, no final XOR): the pure-Python reference."""
     low, word = _CRC16_LOW32, _CRC16_WORD
     n = len(data)
     c = 0
@@ -116,18 +128,8 @@ def crc16(data: bytes | bytearray | memoryview) -> int:
     return c
 
 
-def crc32_ch1(data: bytes | bytearray | memoryview) -> int:
-    """RSSP-I channel-1 CRC32 of the user data."""
-    return crc32_pair(data)[0]
-
-
-def crc32_ch2(data: bytes | bytearray | memoryview) -> int:
-    """RSSP-I channel-2 CRC32 of the user data."""
-    return crc32_pair(data)[1]
-
-
-def crc32_pair(data: bytes | bytearray | memoryview) -> tuple[int, int]:
-    """Both channel CRC32s in one pass over the data (init 0, no final XOR)."""
+def crc32_pair_py(data: bytes | bytearray | memoryview) -> tuple[int, int]:
+    """Both channel CRC32s in one pass over the data (init 0, no final XOR): the pure-Python reference."""
     l1, w1, l2, w2 = _CRC32_CH1_LOW32, _CRC32_CH1_WORD, _CRC32_CH2_LOW32, _CRC32_CH2_WORD
     # The codes take every byte bit-reversed; bytes.translate does that in C.
     data = bytes(data).translate(_BYTE_REVERSED)
@@ -149,3 +151,55 @@ def crc32_pair(data: bytes | bytearray | memoryview) -> tuple[int, int]:
         c1 = _CRC32_CH1_BYTE[(c1 ^ b) & 0xFF] ^ (c1 >> 8)
         c2 = _CRC32_CH2_BYTE[(c2 ^ b) & 0xFF] ^ (c2 >> 8)
     return c1, c2
+
+
+# ------------------------------------------------------------------------------------------ backends
+def _compiled_functions():
+    """(crc16, crc32_pair) as numba kernels: bytes, bytearray and their memoryviews; TypeError otherwise."""
+    from rssp1 import _compiled
+
+    return _compiled.crc16, _compiled.crc32_pair
+
+
+BACKENDS: dict[str, tuple] = {"python": (crc16_py, crc32_pair_py)}
+unavailable: dict[str, str] = {}  # backend -> why it is not in BACKENDS
+_requested = os.environ.get("RSSP1_BACKEND", "").strip().lower()
+if _requested not in ("", "python", "numba"):
+    raise ImportError(f"RSSP1_BACKEND={_requested!r}: expected 'python' or 'numba'")
+if _requested == "python":
+    unavailable["numba"] = "RSSP1_BACKEND=python"
+else:
+    try:
+        BACKENDS["numba"] = _compiled_functions()
+    except Exception as exc:  # no numba, or one that cannot compile here: the reference does the work
+        if _requested == "numba":
+            raise
+        unavailable["numba"] = f"{type(exc).__name__}: {exc}"
+
+backend = "numba" if "numba" in BACKENDS else "python"
+crc16, crc32_pair = BACKENDS[backend]
+
+
+def crc32_ch1(data: bytes | bytearray | memoryview) -> int:
+    """RSSP-I channel-1 CRC32 of the user data."""
+    return crc32_pair(data)[0]
+
+
+def crc32_ch2(data: bytes | bytearray | memoryview) -> int:
+    """RSSP-I channel-2 CRC32 of the user data."""
+    return crc32_pair(data)[1]
+
+
+def use_backend(name: str) -> str:
+    """Select the CRC backend for every rssp1 caller from now on; returns the previous one.
+
+    Callers in rssp1 look the functions up in this module at each call, so this takes effect
+    everywhere (a name imported with `from rssp1.crc import crc16` elsewhere keeps its backend;
+    both compute the same values).
+    """
+    global backend, crc16, crc32_pair
+    if name not in BACKENDS:
+        raise ValueError(f"CRC backend {name!r} not available (have: {', '.join(BACKENDS)})")
+    previous, backend = backend, name
+    crc16, crc32_pair = BACKENDS[name]
+    return previous

@@ -58,7 +58,7 @@ from rssp1.frames import (
     encode_sse,
     encode_ssr,
 )
-from rssp1.timestamp import TIMESTAMP_CH1, TIMESTAMP_CH2
+from rssp1.timestamp import TIMESTAMP_CH1, TIMESTAMP_CH2, advance_pair, step_pair
 
 TC_MODULUS = 1 << 32  # TC is a u32 on the wire
 
@@ -227,9 +227,8 @@ class Endpoint:
             if self.state is LinkState.SYNCING and gap == 0:
                 return self._drop("at_sync_point")
             return self._drop("repeat")
-        t1 = TIMESTAMP_CH1.advance(self._last_t[0], gap)
-        t2 = TIMESTAMP_CH2.advance(self._last_t[1], gap)
-        if checkword.timestamp_from_svc(rsd.svc, rsd.data, self.peer.sid) != (t1, t2):
+        t = advance_pair(self._last_t, gap)
+        if checkword.timestamp_from_svc(rsd.svc, rsd.data, self.peer.sid) != t:
             return self._drop("svc")
         if gap >= self.timing.delta_time:
             self.stats["dropped_gap"] += 1
@@ -243,7 +242,7 @@ class Endpoint:
                 self._refresh_wanted = True  # close to the limit: re-anchor before drift drops us
         else:  # the peer runs ahead of our estimate (its clock is a little faster): follow it
             self._anchor_tc, self._anchor_cycle = rsd.tc, self.local_cycle
-        self._last_tc, self._last_t = rsd.tc, (t1, t2)
+        self._last_tc, self._last_t = rsd.tc, t
         self._good_since_tick = True
         self.stats["rx_rsd_ok"] += 1
         events: list[Event] = []
@@ -311,7 +310,7 @@ class Endpoint:
             frames.append(encode_rsd(src, dst, self.tc, words, data, msg_type=self.machine, category=self.category))
             self.stats["tx_rsd"] += 1
         self.tc = (self.tc + 1) % TC_MODULUS
-        self._t = (TIMESTAMP_CH1.step(self._t[0]), TIMESTAMP_CH2.step(self._t[1]))
+        self._t = step_pair(self._t)
         return frames, events
 
     @property

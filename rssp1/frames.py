@@ -16,7 +16,7 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass
 
-from rssp1.crc import crc16
+from rssp1 import crc as _crc  # looked up per call: rssp1.crc.use_backend() switches backends
 
 # Protocol interaction category (byte 0). 0x01 is "active"; standby is 0x02 at one vendor and 0x00 at
 # another (rssp1.md), so decoding accepts any value and reports it.
@@ -95,7 +95,7 @@ Frame = Rsd | Sse | Ssr
 
 
 def _with_crc16(body: bytes) -> bytes:
-    return body + CRC16_FIELD.pack(crc16(body))
+    return body + CRC16_FIELD.pack(_crc.crc16(body))
 
 
 def encode_rsd(
@@ -157,7 +157,7 @@ def check_crc16(frame: bytes | memoryview) -> bool:
     """True when the frame's last two bytes are the CRC16 of the rest (the explicit comparison)."""
     if len(frame) < CRC16_BYTES + 1:
         return False
-    return crc16(frame[:-CRC16_BYTES]) == CRC16_FIELD.unpack_from(frame, len(frame) - CRC16_BYTES)[0]
+    return _crc.crc16(frame[:-CRC16_BYTES]) == CRC16_FIELD.unpack_from(frame, len(frame) - CRC16_BYTES)[0]
 
 
 def expected_length(prefix: bytes | memoryview) -> int | None:
@@ -205,7 +205,7 @@ def decode_frame(frame: bytes | bytearray | memoryview) -> Frame:
     # A reflected CRC with init 0 and no final XOR, stored low byte first, leaves a zero residue when
     # run over the frame including its CRC: one pass, no slice (tests check it equals the
     # compare-with-stored-field form on every captured frame).
-    if crc16(frame) != 0:
+    if _crc.crc16(frame) != 0:
         raise FrameError("crc16")
     if msg_type in RSD_TYPES:
         return Rsd(category, msg_type, source, destination, tc, (svc1, svc2), bytes(frame[RSD_PREFIX.size : body_end]))
