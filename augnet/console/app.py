@@ -22,11 +22,13 @@ from __future__ import annotations
 import logging
 
 from fastapi import FastAPI, Request, status
+from fastapi.encoders import jsonable_encoder
+from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from fastapi.staticfiles import StaticFiles
 from sqlalchemy.orm import Session, sessionmaker
 
-from augnet.console.live import LiveState
+from augnet.console.live import LiveState, json_safe
 from augnet.console.metrics import MetricsMiddleware, RequestMetrics
 from augnet.console.routers import alarms, auth, caster, history, network, operators, page, stations, trains
 from augnet.console.routers import live as live_feed
@@ -50,6 +52,13 @@ def create_app(sessions: sessionmaker[Session], live: LiveState | None = None) -
         app.include_router(module.router, prefix=API_PREFIX)
     app.include_router(page.router)
     app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
+
+    @app.exception_handler(RequestValidationError)
+    async def invalid_request(_request: Request, exc: RequestValidationError) -> JSONResponse:
+        """FastAPI's 422 shape (a list of errors, each with the field's loc), made JSON-safe: an error may
+        quote the offending input, and NaN or infinity in a body cannot be written back as JSON."""
+        return JSONResponse({"detail": json_safe(jsonable_encoder(exc.errors()))},
+                            422)
 
     @app.exception_handler(q.NotFound)
     async def not_found(_request: Request, exc: q.NotFound) -> JSONResponse:

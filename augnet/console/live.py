@@ -69,19 +69,19 @@ class TrainLive:
     updated_unix: float = 0.0
 
 
-def _clean(value: Any) -> Any:
+def json_safe(value: Any) -> Any:
     """JSON-safe copy: NaN and infinities become None (JSON has no such numbers)."""
     if isinstance(value, float):
         return value if math.isfinite(value) else None
     if isinstance(value, dict):
-        return {k: _clean(v) for k, v in value.items()}
+        return {k: json_safe(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_clean(v) for v in value]
+        return [json_safe(v) for v in value]
     return value
 
 
 def as_dict(obj: Any) -> dict[str, Any]:
-    return _clean(dataclasses.asdict(obj))
+    return json_safe(dataclasses.asdict(obj))
 
 
 class _Subscriber:
@@ -155,12 +155,12 @@ class LiveState:
     def set_network(self, network: dict[str, Any]) -> None:
         with self._lock:
             self.network = dict(network)
-        self.publish({"type": "network", "network": _clean(self.network)})
+        self.publish({"type": "network", "network": json_safe(self.network)})
 
     def set_line(self, line: dict[str, Any]) -> None:
         with self._lock:
             self.line = dict(line)
-        self.publish({"type": "line", "line": _clean(self.line)})
+        self.publish({"type": "line", "line": json_safe(self.line)})
 
     # --- readers ------------------------------------------------------------------------------------
 
@@ -178,11 +178,11 @@ class LiveState:
 
     def network_summary(self) -> dict[str, Any]:
         with self._lock:
-            return _clean(self.network)
+            return json_safe(self.network)
 
     def line_summary(self) -> dict[str, Any]:
         with self._lock:
-            return _clean(self.line)
+            return json_safe(self.line)
 
     def caster(self) -> dict[str, Any] | None:
         """The caster's snapshot, or None when no caster runs in this process (or its snapshot fails:
@@ -203,8 +203,8 @@ class LiveState:
                 "stations": [as_dict(s) for s in self.stations.values()],
                 "baselines": [as_dict(b) for b in self.baselines],
                 "trains": [as_dict(t) for t in sorted(self.trains.values(), key=lambda t: t.id)],
-                "network": _clean(self.network),
-                "line": _clean(self.line),
+                "network": json_safe(self.network),
+                "line": json_safe(self.line),
             }
 
     # --- websocket fan-out --------------------------------------------------------------------------
@@ -253,4 +253,4 @@ class LiveState:
         callback = self.on_station_change
         if callback is not None:
             callback(code, dict(change))
-        self.publish({"type": "station.changed", "code": code, "change": _clean(change)})
+        self.publish({"type": "station.changed", "code": code, "change": json_safe(change)})

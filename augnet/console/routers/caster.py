@@ -8,7 +8,7 @@ import logging
 from fastapi import APIRouter, Response, status
 
 from augnet.console.deps import DB, Admin, Live, Viewer, field_error
-from augnet.console.live import LiveState
+from augnet.console.live import LiveState, json_safe
 from augnet.console.schemas import (
     CasterOut,
     CasterUserIn,
@@ -47,13 +47,15 @@ def caster(who: Viewer, live: Live) -> CasterOut:
         return CasterOut(running=False)
     return CasterOut(running=True, started_at=snap.get("started_at"), port=snap.get("port"),
                      clients_now=snap.get("clients_now", 0), connections_now=snap.get("connections_now", 0),
-                     counters=snap.get("counters", {}), mountpoints_live=len(snap.get("mounts") or {}))
+                     counters=json_safe(snap.get("counters", {})), mountpoints_live=len(snap.get("mounts") or {}))
 
 
 def _mount_out(mp: Mountpoint | None, name: str, stats: dict | None) -> MountpointOut:
     if mp is None:
+        stats = json_safe(stats)
         return MountpointOut(name=name, kind=(stats or {}).get("kind", "source"), format=None, read_groups=None,
                              write_groups=None, enabled=True, in_store=False, stats=stats)
+    stats = json_safe(stats)
     return MountpointOut(name=mp.name, kind=mp.kind, format=mp.format, read_groups=mp.read_groups,
                          write_groups=mp.write_groups, enabled=mp.enabled, in_store=True, stats=stats)
 
@@ -95,7 +97,7 @@ def clients(who: Viewer, live: Live) -> list[dict]:
     """Connected NTRIP clients as the caster reports them (id, ip, user, mount, version, bytes out, last GGA
     position, serving base); empty when no caster runs in this process."""
     snap = _snapshot(live)
-    return list((snap or {}).get("clients") or [])
+    return json_safe(list((snap or {}).get("clients") or []))
 
 
 def _user_out(u: CasterUser, counts: dict[str, int]) -> CasterUserOut:
