@@ -1,0 +1,1 @@
+"""`augnet up`: the whole system in one process (see runtime.py)."""

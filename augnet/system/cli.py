@@ -1,0 +1,104 @@
+"""`augnet up [SCENARIO] [--trains N] [--duration S] [--db URL]`: the whole system in one process."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import sys
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from augnet.system.settings import (DEFAULT_CASTER_PORT, DEFAULT_CONSOLE_PORT, DEFAULT_DB_URL, SettingsError,
+                                    SystemSettings)
+
+
+def up(
+    scenario: str = typer.Argument("demo", help="Scenario name (stations/scenarios) or a YAML file."),
+    trains: Optional[int] = typer.Option(None, help="Number of simulated trains (default: the scenario's)."),
+    duration: Optional[float] = typer.Option(None, help="Stop by itself after this many seconds and write the run report."),
+    db: str = typer.Option(DEFAULT_DB_URL, help="Store URL: SQLite file (default) or postgresql://..."),
+    host: str = typer.Option("127.0.0.1", help="Address the caster and console listen on."),
+    caster_port: int = typer.Option(DEFAULT_CASTER_PORT, help="NTRIP caster port."),
+    console_port: int = typer.Option(DEFAULT_CONSOLE_PORT, help="Operator console port (0: no console)."),
+    bus: str = typer.Option("", help="Correction bus: empty = in-process, or nats://HOST:PORT (JetStream)."),
+    rbc: bool = typer.Option(True, "--rbc/--no-rbc", help="Run the RSSP-I link to the RBC simulator."),
+    view: bool = typer.Option(True, "--view/--no-view", help="Live terminal view (off: log lines)."),
+    report: Optional[Path] = typer.Option(None, help="Run report path (default with --duration: augnet-run-report.json)."),
+    state: Path = typer.Option(Path("augnet-up.json"), help="Where tools find the URLs and credentials of this run."),
+    admin_password: str = typer.Option("", envvar="AUGNET_ADMIN_PASSWORD",
+                                       help="Console admin password (first run; default: random, printed)."),
+) -> None:
+    """Stations, caster, centre, RSSP-I link, trains and console in one asyncio process."""
+    from augnet.system.runtime import System
+
+    settings = SystemSettings(scenario=scenario, trains=trains, duration_s=duration, db_url=db, host=host,
+                              caster_port=caster_port, console_port=console_port, bus_url=bus, rbc=rbc,
+                              view=view, report_path=report, state_path=state, admin_password=admin_password)
+    try:
+        settings.validate()
+        from stations.scenario import load_scenario
+        load_scenario(scenario)
+    except SettingsError as exc:
+        typer.echo(f"error: --{exc}", err=True)
+        raise typer.Exit(2)
+    except Exception as exc:  # noqa: BLE001 - an unknown scenario or a bad file: say which
+        typer.echo(f"error: scenario {scenario!r}: {exc}", err=True)
+        raise typer.Exit(2)
+    logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    summary = asyncio.run(_main(settings))
+    if summary is None:
+        raise typer.Exit(1)
+    if duration:
+        path = report or Path("augnet-run-report.json")
+        path.write_text(summary.to_json())
+        typer.echo(f"run report: {path}")
+    fixed = [t for t, v in summary.trains.items() if v["holds_fix"]]
+    typer.echo(f"stopped after {summary.duration_s:.0f} s: {summary.network_epochs} network epochs, "
+               f"trains holding a fix at the end: {', '.join(fixed) or 'none'}")
+
+
+async def _main(settings: SystemSettings):
+    from augnet.system.runtime import System
+
+    system = System(settings)
+    runner = asyncio.ensure_future(system.run(settings.duration_s))
+    ready = asyncio.ensure_future(system.ready.wait())
+    await asyncio.wait([runner, ready], return_when=asyncio.FIRST_COMPLETED)
+    if runner.done():
+        try:
+            return runner.result()
+        except OSError as exc:
+            print(f"error: {exc} (is another augnet up running? use --caster-port / --console-port)", file=sys.stderr)
+            return None
+    print(f"augnet up: scenario {settings.scenario}, {len(system.trains)} trains", flush=True)
+    print(f"console: {system.console_url or 'off'}", flush=True)
+    if system.admin_password_created:
+        print(f"console admin account created: admin / {system.admin_password_created}", flush=True)
+    if system.admin_token:
+        print(f"console admin token: {system.admin_token}", flush=True)
+    print(f"caster: ntrip://127.0.0.1:{system.caster.port}/VRS (user {system.credentials['train_user']}, "
+          f"password in {settings.state_path})", flush=True)
+    if settings.view and sys.stdout.isatty():
+        from augnet.system.view import run_view
+        view = asyncio.ensure_future(run_view(system))
+    else:
+        view = asyncio.ensure_future(_log_lines(system))
+    try:
+        return await runner
+    finally:
+        view.cancel()
+
+
+async def _log_lines(system, every_s: float = 10.0) -> None:
+    """Without a terminal: one status line every `every_s`."""
+    while not system.stop_event.is_set():
+        await asyncio.sleep(every_s)
+        r = system.last_report
+        trains = " ".join(f"{tid}:{({1: 'fix', 2: 'float', 5: 'single'}.get(int(t.last.solution.status), 'none') if t.last else '-')}"
+                          for tid, t in sorted(system.trains.items()))
+        fixed = r.network.fixed_fraction() if r else {}
+        print(f"[{system.settings.scenario}] epochs {system.centre.timings.epochs} stations "
+              f"{len(r.network.present) if r else 0}/{len(system.centre.engine.stations)} baselines fixed "
+              f"{sum(v >= 0.5 for v in fixed.values())}/{len(fixed)} trains {trains}", flush=True)

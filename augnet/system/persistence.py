@@ -1,0 +1,104 @@
+"""What `augnet up` writes to the store: the configuration it runs (stations, mountpoints, caster users,
+trains), train sessions, alarms raised and cleared by the centre, and the network quality history.
+
+Every write runs on one worker thread (`StoreWriter`), in order, so the event loop carrying the caster's
+sockets never waits for the database; a failed write is logged and counted, never raised into the loop.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import datetime as dt
+import logging
+from typing import Callable
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session, sessionmaker
+
+from augnet.store import queries
+from augnet.store.models import CasterUser, Mountpoint, Station, Train, TrainSession, utcnow
+
+log = logging.getLogger(__name__)
+
+SYSTEM_ACTOR = "system"  # audit-log actor for what the running system itself records
+
+
+class StoreWriter:
+    def __init__(self, sessions: sessionmaker[Session]):
+        self.sessions = sessions
+        self._pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="augnet-store")
+        self.failures = 0
+        self.writes = 0
+
+    def submit(self, fn: Callable[[Session], object]) -> concurrent.futures.Future:
+        return self._pool.submit(self._run, fn)
+
+    def _run(self, fn: Callable[[Session], object]):
+        try:
+            with self.sessions.begin() as s:
+                out = fn(s)
+            self.writes += 1
+            return out
+        except Exception:  # noqa: BLE001 - the store failing must not take the system down
+            self.failures += 1
+            log.exception("store write failed")
+            return None
+
+    def close(self, timeout: float = 10.0) -> None:
+        self._pool.shutdown(wait=True, cancel_futures=False)
+
+
+# --- the running configuration -------------------------------------------------------------------------
+
+def register_station(s: Session, code: str, name: str, xyz_m, rtcm_id: int, mountpoint: str) -> bool:
+    """Add the station if the store does not know it; returns its enabled flag (an operator may have
+    disabled it in an earlier run: that decision stands)."""
+    st = s.scalar(select(Station).where(Station.code == code))
+    if st is None:
+        st = queries.add_station(s, SYSTEM_ACTOR, code, tuple(float(v) for v in xyz_m), rtcm_id, mountpoint, name)
+    return bool(st.enabled)
+
+
+def register_mountpoint(s: Session, name: str, kind: str, read: str, write: str = "") -> None:
+    mp = s.scalar(select(Mountpoint).where(Mountpoint.name == name))
+    if mp is None:
+        s.add(Mountpoint(name=name, kind=kind, read_groups=read, write_groups=write))
+    else:
+        mp.kind, mp.read_groups, mp.write_groups = kind, read, write
+
+
+def register_caster_user(s: Session, name: str, password_hash: str, groups: str) -> None:
+    u = s.scalar(select(CasterUser).where(CasterUser.name == name))
+    if u is None:
+        s.add(CasterUser(name=name, password_hash=password_hash, groups=groups))
+    else:
+        u.password_hash, u.groups = password_hash, groups
+
+
+def open_train_session(s: Session, code: str, mountpoint: str) -> int:
+    tr = s.scalar(select(Train).where(Train.code == code))
+    if tr is None:
+        tr = Train(code=code)
+        s.add(tr)
+        s.flush()
+    ts = TrainSession(train_id=tr.id, mountpoint=mountpoint)
+    s.add(ts)
+    s.flush()
+    return ts.id
+
+
+def close_train_session(s: Session, session_id: int, bytes_sent: int, fix_rate: float | None) -> None:
+    ts = s.get(TrainSession, session_id)
+    if ts is not None:
+        ts.ended_at = utcnow()
+        ts.bytes_sent = int(bytes_sent)
+        ts.fix_rate = fix_rate
+
+
+def station_enabled_map(s: Session) -> dict[str, bool]:
+    return {st.code: bool(st.enabled) for st in s.scalars(select(Station))}
+
+
+def record_quality_batch(s: Session, at: dt.datetime, rows: list[tuple[str, float, float | None, int]]) -> None:
+    for subject, fixed, rms, sats in rows:
+        queries.record_quality(s, at, subject, fixed, rms, sats)

@@ -1,0 +1,131 @@
+"""The centre's RSSP-I link to the RBC inside `augnet up`: line sections, their integrity, alarms.
+
+The line is cut into `SECTION_LENGTH_KM` sections (section ids 1..n from km 0). Each network epoch
+sets every section's status from what the centre can vouch for there:
+  OK          the two reference stations bracketing the section along the line delivered this epoch
+              and the network has fixed ambiguities on the baselines touching them;
+  DEGRADED    one of them is missing, or those baselines are not (yet) fixed: corrections there rest on
+              stations farther away (interpolation over a longer distance);
+  DO_NOT_USE  neither is delivering, or no correction model at all (the RBC's own age watchdog also
+              turns every section DO_NOT_USE when reports stop).
+Centre alarms (station down, satellite excluded) become RSSP-I alarms; the RBC simulator on the other
+end of a loopback UDP link shows what a real RBC would believe.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from rssp1.config import DeviceConfig, LinkTiming
+from rssp1.endpoint import Endpoint
+from rssp1.messages import AlarmCode, SectionStatus, Severity
+from rssp1.rbc import CentreRbcLink, RbcSimulator
+from rssp1.transport import UdpLink
+
+SECTION_LENGTH_KM = 10.0
+FIXED_ENOUGH = 0.5  # share of a baseline's eligible DD ambiguities fixed for it to count as fixed
+# Device identities of the demo link (as in rssp1.loopback: the RBC is source 0x0029 of the captures).
+CENTRE_DEVICE = DeviceConfig(0x0101, (0x1A2B3C4D, 0x5E6F7081), dataver=(1, 2), name="centre")
+RBC_DEVICE = DeviceConfig(0x0029, (0x311616DC, 0x07643EDE), dataver=(10, 11), name="rbc")
+LINK_TIMING = LinkTiming()  # 250 ms main cycle
+MAX_CORRECTION_AGE_S = 5.0  # network-rtk.md: corrections older than ~5 s lose the fix
+ALARM_CODES = {"station-down": AlarmCode.STATION_FAILED, "satellite-fault": AlarmCode.SATELLITE_EXCLUDED}
+SEVERITY = {"info": Severity.INFO, "warning": Severity.WARNING, "critical": Severity.CRITICAL}
+
+
+class SectionPlan:
+    """Which stations bracket each line section (by their chainage along the line)."""
+
+    def __init__(self, line_length_km: float, station_km: dict[str, float]):
+        self.n = max(1, int(math.ceil(line_length_km / SECTION_LENGTH_KM)))
+        self.ids = list(range(1, self.n + 1))
+        names = sorted(station_km, key=station_km.get)
+        kms = np.array([station_km[n] for n in names])
+        self.bracket: dict[int, tuple[str, str]] = {}
+        for sid in self.ids:
+            mid = (sid - 0.5) * SECTION_LENGTH_KM
+            i = int(np.searchsorted(kms, mid))
+            a = names[max(i - 1, 0)]
+            b = names[min(i, len(names) - 1)]
+            self.bracket[sid] = (a, b)
+
+    def statuses(self, present: set[str], fixed_stations: set[str]) -> dict[int, SectionStatus]:
+        out = {}
+        for sid, (a, b) in self.bracket.items():
+            up = [s for s in (a, b) if s in present]
+            if not up:
+                out[sid] = SectionStatus.DO_NOT_USE
+            elif len(up) == 2 and all(s in fixed_stations for s in up):
+                out[sid] = SectionStatus.OK
+            else:
+                out[sid] = SectionStatus.DEGRADED
+        return out
+
+
+def fixed_stations(fixed_fraction: dict[str, float]) -> set[str]:
+    """Stations touched by at least one baseline with enough fixed ambiguities ("A-B" keys)."""
+    out: set[str] = set()
+    for key, frac in fixed_fraction.items():
+        if frac >= FIXED_ENOUGH:
+            out.update(key.split("-"))
+    return out
+
+
+class RbcConnection:
+    """Both ends of the link on loopback UDP, driven by rssp1's cycle loops."""
+
+    def __init__(self, plan: SectionPlan, station_ids: dict[str, int]):
+        self.plan = plan
+        self.station_ids = station_ids
+        self.centre = CentreRbcLink(Endpoint(CENTRE_DEVICE, RBC_DEVICE, LINK_TIMING),
+                                    max_correction_age_s=MAX_CORRECTION_AGE_S)
+        self.rbc = RbcSimulator(Endpoint(RBC_DEVICE, CENTRE_DEVICE, LINK_TIMING),
+                                max_correction_age_s=MAX_CORRECTION_AGE_S)
+        for sid in plan.ids:
+            self.centre.set_section(sid, SectionStatus.DO_NOT_USE)
+        self.links: list = []
+        self.tasks: list = []
+
+    async def start(self, host: str = "127.0.0.1") -> None:
+        import asyncio
+
+        rbc_link = await UdpLink.open(self.rbc, LINK_TIMING.cycle_s, (host, 0), (host, 9))
+        centre_link = await UdpLink.open(self.centre, LINK_TIMING.cycle_s, (host, 0), rbc_link.local_address)
+        rbc_link.remote = centre_link.local_address
+        self.links = [centre_link, rbc_link]
+        self.tasks = [asyncio.ensure_future(link.run()) for link in self.links]
+
+    def on_epoch(self, t_gpst: float, produced_at_s: float, present: set[str], fixed_fraction: dict[str, float],
+                 excluded_sats, alarms) -> None:
+        """One network epoch: sections, exclusions, correction age, alarms (produced_at_s: monotonic)."""
+        for sid, status in self.plan.statuses(present, fixed_stations(fixed_fraction)).items():
+            self.centre.set_section(sid, status)
+        down = [self.station_ids[s] for s in self.station_ids if s not in present]
+        self.centre.set_exclusions(sorted(excluded_sats), down)
+        self.centre.corrections_updated(int(round(t_gpst * 1000)), produced_at_s)
+        for a in alarms:
+            if getattr(a, "cleared", False):
+                continue
+            code = ALARM_CODES.get(a.kind, AlarmCode.OPERATOR)
+            self.centre.raise_alarm(code, SEVERITY.get(a.severity, Severity.WARNING), text=f"{a.subject}: {a.message}"[:60])
+
+    def snapshot(self) -> dict:
+        counts = {s.name: 0 for s in SectionStatus}
+        for sid in self.plan.ids:
+            counts[self.rbc.effective_status(sid).name] += 1
+        return {"link_up": self.centre.is_up, "rbc_fresh": self.rbc.fresh, "sections": counts,
+                "rbc_alarms": len(self.rbc.alarms),
+                "last_rbc_alarm": (self.rbc.alarms[-1].code.name if self.rbc.alarms else None)}
+
+    async def stop(self) -> None:
+        import asyncio
+
+        for link in self.links:
+            r = link.close()
+            if asyncio.iscoroutine(r):
+                await r
+        for t in self.tasks:
+            t.cancel()
+        await asyncio.gather(*self.tasks, return_exceptions=True)
