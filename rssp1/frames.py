@@ -110,12 +110,11 @@ def encode_rsd(
 ) -> bytes:
     if msg_type not in RSD_TYPES:
         raise ValueError(f"not an RSD type: {msg_type:#x}")
-    if len(data) > MAX_RSD_DATA_BYTES:
-        raise ValueError(f"RSD data {len(data)} bytes > {MAX_RSD_DATA_BYTES}")
-    prefix = RSD_PREFIX.pack(
-        category, msg_type, source, destination, tc, len(data) + SDS_EXTRA_BYTES, svc[0], svc[1]
-    )
-    return _with_crc16(prefix + data)
+    n = len(data)
+    if n > MAX_RSD_DATA_BYTES:
+        raise ValueError(f"RSD data {n} bytes > {MAX_RSD_DATA_BYTES}")
+    body = RSD_PREFIX.pack(category, msg_type, source, destination, tc, n + SDS_EXTRA_BYTES, svc[0], svc[1]) + data
+    return body + CRC16_FIELD.pack(_crc.crc16(body))  # _with_crc16, inlined: one call less per frame
 
 
 def encode_sse(
@@ -208,7 +207,8 @@ def decode_frame(frame: bytes | bytearray | memoryview) -> Frame:
     if _crc.crc16(frame) != 0:
         raise FrameError("crc16")
     if msg_type in RSD_TYPES:
-        return Rsd(category, msg_type, source, destination, tc, (svc1, svc2), bytes(frame[RSD_PREFIX.size : body_end]))
+        data = frame[RSD_PREFIX.size : body_end]
+        return Rsd(category, msg_type, source, destination, tc, (svc1, svc2), data if type(data) is bytes else bytes(data))
     if msg_type == TYPE_SSE:
         category, _t, source, destination, tc_e, q1, q2 = SSE_BODY.unpack_from(frame, 0)
         return Sse(category, source, destination, tc_e, (q1, q2))
