@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import asyncio
 import base64
+import collections
 import math
 import random
 from dataclasses import dataclass, field
@@ -35,6 +36,7 @@ CONNECT_TIMEOUT_S = 10.0
 RESPONSE_TIMEOUT_S = 10.0
 QUEUE_EPOCHS = 5  # at most this many epochs wait for a slow link; older ones are dropped
 LIVE_BLOCK_EPOCHS = 5  # simulate a few epochs ahead of the wall clock
+MSM_FIRST_TYPE, MSM_LAST_TYPE = 1071, 1137  # RTCM 10403.3: MSM1-7 of GPS ... BeiDou
 LATE_EPOCH_S = 1.0  # live: an epoch this far behind its GPS time is dropped, not sent late
 
 
@@ -190,6 +192,23 @@ class SourceConnection:
             closed.cancel()
 
 
+def non_observation_frames(blob: bytes) -> bytes:
+    """The frames of an epoch's RTCM that are not observations (MSM 1071-1137): station position,
+    descriptors and ephemerides, which stay valid when the epoch itself is too old to send."""
+    out = bytearray()
+    pos, n = 0, len(blob)
+    while pos + 6 <= n and blob[pos] == 0xD3:
+        length = ((blob[pos + 1] & 0x03) << 8) | blob[pos + 2]
+        end = pos + 6 + length
+        if end > n:
+            break
+        msg_type = (blob[pos + 3] << 4) | (blob[pos + 4] >> 4) if length >= 2 else 0
+        if not MSM_FIRST_TYPE <= msg_type <= MSM_LAST_TYPE:
+            out += blob[pos:end]
+        pos = end
+    return bytes(out)
+
+
 def live_scenario(sc: Scenario) -> Scenario:
     """The scenario started at the next whole second of the current GPS time."""
     start = gtime.to_datetime(float(math.ceil(gtime.now_gpst())))
@@ -231,6 +250,7 @@ async def run_stations(sc: Scenario, host: str, port: int, *, user: str = "", pa
     wall0, gps0 = loop.time(), gtime.now_gpst()
     if not on_gps_clock:
         gps0 = world.t0
+    carry: collections.defaultdict[str, bytearray] = collections.defaultdict(bytearray)
     try:
         for blk in world.epochs(LIVE_BLOCK_EPOCHS):
             streams.add(blk)
@@ -240,11 +260,12 @@ async def run_stations(sc: Scenario, host: str, port: int, *, user: str = "", pa
                 due = wall0 + (float(t) - gps0) / speed
                 delay = due - loop.time()
                 if on_gps_clock and delay < -LATE_EPOCH_S:
-                    for c in conns.values():
-                        c.stats.epochs_dropped += 1
-                    for pending in streams.epoch_bytes.values():
+                    # too late: the observations go, the station and ephemeris messages (which do
+                    # not age) still leave with the next epoch that is sent
+                    for rid, pending in streams.epoch_bytes.items():
                         while pending and pending[0][0] <= float(t) + 1e-6:
-                            pending.pop(0)
+                            carry[rid] += non_observation_frames(pending.pop(0)[1])
+                            conns[rid].stats.epochs_dropped += 1
                     continue
                 if delay > 0:
                     try:
@@ -256,7 +277,7 @@ async def run_stations(sc: Scenario, host: str, port: int, *, user: str = "", pa
                 for rid, conn in conns.items():
                     pending = streams.epoch_bytes[rid]
                     while pending and pending[0][0] <= float(t) + 1e-6:
-                        conn.offer(pending.pop(0)[1])
+                        conn.offer(bytes(carry.pop(rid, b"")) + pending.pop(0)[1])
             if stop.is_set():
                 break
         # let the last epochs leave

@@ -124,3 +124,21 @@ def test_backoff_doubles_when_the_caster_is_down(monkeypatch):
     # delays 0.02, 0.04, 0.08, 0.16, 0.32 (+-25 %): about five attempts in 0.6 s, not dozens
     assert 3 <= stats.failures <= 7
     assert stats.connects == 0
+
+
+def test_a_late_epoch_keeps_its_station_and_ephemeris_messages():
+    from augnet.gnss.rtcm import encode_frame
+    from stations.live import non_observation_frames
+    from stations.rtcm_stream import arp_message
+
+    import numpy as np
+
+    arp = encode_frame(arp_message(101, np.array([-2.2e6, 4.4e6, 4.0e6])))
+    fake_msm = bytearray(encode_frame(arp_message(101, np.array([-2.2e6, 4.4e6, 4.0e6]))))
+    # rewrite its type to 1077 (MSM7 GPS) and fix nothing else: the filter looks at the type only
+    fake_msm[3] = (1077 >> 4) & 0xFF
+    fake_msm[4] = ((1077 & 0xF) << 4) | (fake_msm[4] & 0x0F)
+    blob = bytes(fake_msm) + arp + bytes(fake_msm)
+    assert non_observation_frames(blob) == arp
+    assert non_observation_frames(b"") == b""
+    assert non_observation_frames(arp[:-2]) == b""  # a truncated frame is not passed on
