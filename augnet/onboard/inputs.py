@@ -44,7 +44,8 @@ def load_obs(path: str | os.PathLike) -> ObsArrays:
         for k in lli:
             lli[k][power_fail] |= LLI_SLIP
     return ObsArrays(np.asarray(data.times, dtype=float), [str(s) for s in data.sats], data.obs, lli,
-                     np.asarray(data.header.approx_position_m, dtype=float))
+                     np.asarray(data.header.approx_position_m, dtype=float),
+                     marker_type=getattr(data.header, "marker_type", "") or "")
 
 
 def load_nav(paths: Sequence[str | os.PathLike]) -> tuple[NavigationData, tuple | None, tuple | None]:

@@ -81,6 +81,13 @@ class ObsArrays:
     obs: Mapping[str, np.ndarray]
     lli: Mapping[str, np.ndarray] = field(default_factory=dict)
     approx_position_m: np.ndarray | None = None
+    # RINEX MARKER TYPE; "NON_PHYSICAL" marks a computed station such as a network VRS, whose data
+    # carry the network's residual atmosphere errors (the RTK filter weights its ionosphere for that)
+    marker_type: str = ""
+
+    @property
+    def non_physical(self) -> bool:
+        return self.marker_type.strip().upper() == "NON_PHYSICAL"
 
 
 @dataclass

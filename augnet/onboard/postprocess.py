@@ -2,7 +2,8 @@
 
 Epochs are matched by time: each rover epoch is processed with the latest base epoch not after it
 (within half an interval of tolerance), so a missing base epoch ages the corrections rather than
-stopping the run; the filter itself decides when they are too old.
+stopping the run; the filter itself decides when they are too old.  A base file whose MARKER TYPE is
+NON_PHYSICAL (a network VRS) is treated as one: its residual ionosphere is estimated.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ def process(rover: ObsArrays, base: ObsArrays, nav: NavigationData, base_positio
     base_times = np.array([e.time for e in base_epochs])
     order = np.argsort(base_times, kind="stable")
     base_times = base_times[order]
-    flt = RtkFilter(nav, base_position_m, opt)
+    flt = RtkFilter(nav, base_position_m, opt, base_is_vrs=getattr(base, "non_physical", False))
     for ep in rov_epochs:
         k = int(np.searchsorted(base_times, ep.time + EPOCH_MATCH_TOLERANCE_S, side="right")) - 1
         b = base_epochs[order[k]] if k >= 0 else None

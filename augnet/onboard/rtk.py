@@ -39,7 +39,7 @@ from augnet.gnss.ephemeris import NavigationData
 from augnet.gnss.geometry import azimuth_elevation, ecef_to_geodetic, enu_rotation
 from augnet.onboard.atmosphere import saastamoinen_m
 from augnet.onboard.cycleslip import SlipDetector
-from augnet.onboard.observations import EpochObs
+from augnet.onboard.observations import BAND_FREQ_HZ, SYSTEM_BANDS, EpochObs
 from augnet.onboard.spp import (
     SppOptions,
     SppResult,
@@ -63,6 +63,13 @@ class Status(IntEnum):
 PHASE_SIGMA_A_M = 0.003
 PHASE_SIGMA_B_M = 0.003
 CODE_PHASE_ERROR_RATIO = 100.0
+# ... and with the ionosphere estimated (VRS, medium baselines): code then also carries the base's (for
+# a VRS, the master station's) multipath, correlated over minutes on a static antenna, which a filter
+# treating code as white noise would trust too much; its float would sit tens of cm off with a
+# covariance claiming a few, and the integer search would fail or fix wrongly.  300 is RTKLIB EX's
+# default (demo5 eratio1); measured on network-70km with the centre's VRS, 8 starts: median time to
+# first fix 15 -> 8 s, fixed after the first fix 87 -> 100 %.
+CODE_PHASE_ERROR_RATIO_WITH_IONOSPHERE = 300.0
 # Initial standard deviations of new states.
 INIT_POSITION_SIGMA_M = 30.0
 INIT_VELOCITY_SIGMA_M_S = 10.0
@@ -105,8 +112,9 @@ RELINEARISE_M = 0.05
 # satellite (RTKLIB-EX and commercial engines exclude satellites the same way).
 AR_EXCLUSION_RETRIES = 3
 # A fixed solution must have a 3-D position sigma below this [m] (a fix that only pins a few
-# ambiguity combinations leaves decimetres: it is still a float solution).
-MAX_FIXED_POSITION_SIGMA_M = 0.05
+# ambiguity combinations leaves decimetres: it is still a float solution; with 3 cm the vertical
+# sigma of a fix stays under ~2.5 cm, what a 4 cm vertical 95 % figure needs).
+MAX_FIXED_POSITION_SIGMA_M = 0.03
 # Partial ambiguity resolution tries at most this many nested subsets per search: each integer
 # search costs up to ~0.5 s in Python on a poor float solution, and a rover must keep up with 1 Hz.
 MAX_PARTIAL_FIX_TRIES = 8
@@ -121,6 +129,29 @@ BIASED_FLOAT_RMS_CYC = 0.2
 SPP_CONSISTENCY_M = 30.0
 # Fixed solutions whose DD phase residuals exceed this [m] are rejected (wrong fix).
 MAX_FIXED_PHASE_RESIDUAL_M = 0.05
+# Ionosphere-weighted model (medium baselines and network VRS).  The single-difference (rover - base)
+# ionospheric delay on each satellite's first frequency is a state with a prior sigma of
+# sigma0 * M(el), M the thin-shell mapping function; phase sees -mu I and code +mu I, mu = (f1/f)^2.
+# sigma0 for a physical base grows with the baseline: 3 mm per km (RTKLIB's default 0.03 m per 10 km;
+# quiet mid-latitude DD ionosphere is 1-4 ppm, network-rtk.md).  For a network VRS it is the network's
+# interpolation residual: 1-3 cm DD at 30-70 km spacing (network-rtk.md: Tang et al. 2016; "better than
+# 3 cm under 100 km"), i.e. about 2 cm single-difference.
+IONO_SIGMA_PER_M = 2.0e-6
+VRS_IONO_SIGMA_M = 0.02
+# Below this prior sigma [m] (baselines under ~5 km) the DD ionosphere is left out of the model: the
+# short-baseline model is then exact to millimetres and fixes from the first epoch.
+IONO_ESTIMATE_MIN_SIGMA_M = 0.015
+# Random walk of the SD ionosphere, as a fraction of sigma0 per sqrt(s): a 2 cm VRS residual may drift
+# by ~1 cm over 100 s (the interpolation error changes with the satellites' pierce points).
+IONO_PROCESS_FRACTION_PER_SQRT_S = 0.03
+# Thin ionospheric shell (Klobuchar's and the centre's): height [m] and the Earth's mean radius [m].
+IONO_SHELL_HEIGHT_M = 350_000.0
+EARTH_MEAN_RADIUS_M = 6_371_000.0
+# With the ionosphere in the model, a validated fix is declared only when the same integers have been
+# found in this many consecutive epochs (a biased float can pass one epoch's tests by chance).
+CONFIRM_EPOCHS_WITH_IONOSPHERE = 3
+# A DD ambiguity counts as determined by a fix when its conditional sigma is below this [cycles].
+CONFIRM_SIGMA_CYC = 0.05
 SOLUTION_STATUS_NAMES = {Status.NONE: "none", Status.FIX: "fix", Status.FLOAT: "float", Status.SINGLE: "single"}
 
 
@@ -133,7 +164,7 @@ class RtkOptions:
     n_slots: int = 2
     phase_sigma_a_m: float = PHASE_SIGMA_A_M
     phase_sigma_b_m: float = PHASE_SIGMA_B_M
-    code_phase_ratio: float = CODE_PHASE_ERROR_RATIO
+    code_phase_ratio: float | None = None  # None: CODE_PHASE_ERROR_RATIO, or ..._WITH_IONOSPHERE
     ratio_threshold: float = 3.0
     min_success_rate: float = 0.999
     min_fix_ambiguities: int = 4
@@ -141,6 +172,12 @@ class RtkOptions:
     ambiguity_resolution: bool = True
     max_age_s: float = DEFAULT_MAX_AGE_S
     max_baseline_m: float = DEFAULT_MAX_BASELINE_M
+    # 'auto': estimate the SD ionosphere per satellite for a VRS or beyond ~5 km; 'estimate': always;
+    # 'off': never (the short-baseline model)
+    ionosphere: str = "auto"
+    iono_sigma_m: float | None = None  # prior sigma of the SD vertical ionosphere [m]; None: from the base
+    vrs_iono_sigma_m: float = VRS_IONO_SIGMA_M
+    confirm_epochs: int | None = None  # consecutive agreeing fixes before FIX; None: 1, or 3 with ionosphere
     accel_sigma_h: float = ACCEL_PROCESS_SIGMA_H
     accel_sigma_v: float = ACCEL_PROCESS_SIGMA_V
     spp: SppOptions = field(default_factory=SppOptions)
@@ -173,13 +210,48 @@ class _Group:
     slot: int
 
 
+@dataclass
+class _DD:
+    """One epoch's double differences as parallel index arrays (one entry per non-reference satellite
+    and slot): epoch satellite indices, slot, group, and the state indices of the SD ambiguities and
+    (when estimated) SD ionospheres involved."""
+    k: np.ndarray
+    ref: np.ndarray
+    f: np.ndarray
+    group: np.ndarray
+    i: np.ndarray
+    iref: np.ndarray
+    ion: np.ndarray | None
+    ion_ref: np.ndarray | None
+
+
+def iono_mapping(el_rad) -> np.ndarray:
+    """Thin-shell ionospheric mapping function (slant / vertical delay) at elevation el."""
+    s = EARTH_MEAN_RADIUS_M / (EARTH_MEAN_RADIUS_M + IONO_SHELL_HEIGHT_M) * np.cos(np.asarray(el_rad, dtype=float))
+    return 1.0 / np.sqrt(1.0 - s * s)
+
+
+def _first_wavelength(system: str) -> float:
+    """Wavelength [m] of a system's first frequency (slot 0: L1, E1, B1I), the ionosphere's reference."""
+    return SPEED_OF_LIGHT_M_S / BAND_FREQ_HZ[(system, SYSTEM_BANDS[system][0])]
+
+
 class RtkFilter:
     """The rover's RTK engine.  Feed it epochs with `step`; it keeps its own state between them."""
 
-    def __init__(self, nav: NavigationData, base_position_m, options: RtkOptions | None = None):
+    def __init__(self, nav: NavigationData, base_position_m, options: RtkOptions | None = None,
+                 base_is_vrs: bool = False):
         self.nav = nav
         self.opt = options or RtkOptions()
         self.base_position_m = np.asarray(base_position_m, dtype=float)
+        # a computed (non-physical) base, a network VRS: its residual atmosphere is modelled
+        self.base_is_vrs = bool(base_is_vrs)
+        self.ion_index: dict[str, int] = {}
+        self.ion_outage: dict[str, int] = {}
+        self.iono_active = False
+        self._iono_sigma_now = 0.0
+        self._candidate: dict | None = None
+        self._candidate_count = 0
         self.n_kin = 9 if (self.opt.mode == "kinematic" and self.opt.dynamics) else 3
         self.x = np.zeros(self.n_kin)
         self.P = np.zeros((self.n_kin, self.n_kin))
@@ -200,9 +272,27 @@ class RtkFilter:
     # state bookkeeping
 
     def reset(self) -> None:
-        self.__init__(self.nav, self.base_position_m, self.opt)
+        self.__init__(self.nav, self.base_position_m, self.opt, self.base_is_vrs)
 
     def _new_amb(self, key, value, var) -> int:
+        i = self._new_state(value, var)
+        self.amb_index[key] = i
+        self.amb_outage[key] = 0
+        return i
+
+    def _new_ion(self, sat: str, var: float) -> int:
+        i = self._new_state(0.0, var)
+        self.ion_index[sat] = i
+        self.ion_outage[sat] = 0
+        return i
+
+    def _drop_ion(self, sat: str) -> None:
+        i = self.ion_index.pop(sat, None)
+        self.ion_outage.pop(sat, None)
+        if i is not None:
+            self._free_state(i)
+
+    def _new_state(self, value, var) -> int:
         if self._free:
             i = self._free.pop()
         else:
@@ -215,18 +305,19 @@ class RtkFilter:
         self.P[i, :] = 0.0
         self.P[:, i] = 0.0
         self.P[i, i] = var
-        self.amb_index[key] = i
-        self.amb_outage[key] = 0
         return i
+
+    def _free_state(self, i: int) -> None:
+        self.x[i] = 0.0
+        self.P[i, :] = 0.0
+        self.P[:, i] = 0.0
+        self._free.append(i)
 
     def _drop_amb(self, key) -> None:
         i = self.amb_index.pop(key, None)
         self.amb_outage.pop(key, None)
         if i is not None:
-            self.x[i] = 0.0
-            self.P[i, :] = 0.0
-            self.P[:, i] = 0.0
-            self._free.append(i)
+            self._free_state(i)
 
     # -----------------------------------------------------------------------------------------
 
@@ -299,7 +390,7 @@ class RtkFilter:
             return self._single(t, spp, f"baseline {baseline / 1e3:.0f} km beyond {opt.max_baseline_m / 1e3:.0f} km", age)
 
         self._time_update(t, spp)
-        sol = self._measurement_update(rover, base, spp, age)
+        sol = self._measurement_update(rover, base, spp, age, baseline)
         return sol
 
     # -----------------------------------------------------------------------------------------
@@ -313,6 +404,9 @@ class RtkFilter:
         if np.isfinite(dt) and dt > 0:
             for i in self.amb_index.values():
                 self.P[i, i] += AMBIGUITY_PROCESS_SIGMA_CYC**2 * dt
+            q_ion = (IONO_PROCESS_FRACTION_PER_SQRT_S * self._iono_sigma_now) ** 2 * dt
+            for i in self.ion_index.values():
+                self.P[i, i] += q_ion
         if advance_only and not self.initialised:
             return
         restart = (not self.initialised) or dt > MAX_PREDICTION_GAP_S or dt <= 0
@@ -385,7 +479,17 @@ class RtkFilter:
         s = np.maximum(np.sin(el), 0.05)
         return self.opt.phase_sigma_a_m**2 + self.opt.phase_sigma_b_m**2 / s**2
 
-    def _measurement_update(self, rover: EpochObs, base: EpochObs, spp: SppResult, age: float) -> RtkSolution:
+    def _iono_sigma0(self, baseline_m: float) -> float:
+        """Prior sigma [m] of the single-difference (rover - base) vertical ionospheric delay on the
+        first frequency: the user's figure, a network VRS's residual, or growing with the baseline."""
+        if self.opt.iono_sigma_m is not None:
+            return float(self.opt.iono_sigma_m)
+        if self.base_is_vrs:
+            return float(self.opt.vrs_iono_sigma_m)
+        return IONO_SIGMA_PER_M * baseline_m
+
+    def _measurement_update(self, rover: EpochObs, base: EpochObs, spp: SppResult, age: float,
+                            baseline_m: float = 0.0) -> RtkSolution:
         opt = self.opt
         t = rover.time
         # common satellites
@@ -408,88 +512,103 @@ class RtkFilter:
         phase_b, code_b, _, el_b = self._zero_diff(bo, self.base_position_m, sp_b)
         wl = ro.wavelength_m[:, :nf]
         same_wl = np.isclose(wl, bo.wavelength_m[:, :nf], rtol=0, atol=1e-9)
+        sats = [str(s) for s in ro.sats]
+        sys_ = np.array([s[0] for s in sats])
+        # ionospheric scale of each slot against the system's first frequency: (f1 / f)^2
+        mu = (wl / np.array([_first_wavelength(s) for s in sys_])[:, None]) ** 2
 
-        # handle slips: reset those ambiguities
-        for k, sat in enumerate(ro.sats):
+        # handle slips: reset those ambiguities (and the satellite's ionosphere when every slot slipped:
+        # a receiver losing lock on all signals, or a base whose data for it were re-synthesised)
+        for k, sat in enumerate(sats):
             for f in range(nf):
                 if slips[k, f]:
-                    self._drop_amb((str(sat), f))
+                    self._drop_amb((sat, f))
+            if self.iono_active and slips[k].all():
+                self._drop_ion(sat)
         # outage bookkeeping
         for key in list(self.amb_outage):
             self.amb_outage[key] += 1
             if self.amb_outage[key] > MAX_AMBIGUITY_OUTAGE_EPOCHS:
                 self._drop_amb(key)
+        for key in list(self.ion_outage):
+            self.ion_outage[key] += 1
+            if self.ion_outage[key] > MAX_AMBIGUITY_OUTAGE_EPOCHS:
+                self._drop_ion(key)
 
         x_rov = self.x[:3].copy()
-        sys_ = np.array([s[0] for s in ro.sats])
-        for _it in range(1):
+        phase_r, code_r, los_r, el_r = self._zero_diff(ro, x_rov, sp_r)
+        ok_sat = valid & (el_r >= opt.elevation_mask_rad) & np.isfinite(el_b)
+        sd_phase = phase_r[:, :nf] - phase_b[:, :nf]
+        sd_code = code_r[:, :nf] - code_b[:, :nf]
+        ok = ok_sat[:, None] & np.isfinite(sd_phase) & np.isfinite(sd_code) & same_wl & np.isfinite(wl)
+        var_sd = (self._variance(el_r) + self._variance(el_b))[:, None] * np.ones((1, nf))
+        # ionosphere: switched on for a VRS or a baseline long enough to need it, then kept
+        sigma0 = self._iono_sigma0(baseline_m)
+        if opt.ionosphere == "estimate" or (opt.ionosphere == "auto" and sigma0 >= IONO_ESTIMATE_MIN_SIGMA_M):
+            self.iono_active = True
+        self._iono_sigma_now = sigma0
+        # initialise missing ambiguities from code (cycles), and missing ionospheres at their prior
+        obs_sd_cyc = (ro.phase_cyc[:, :nf] - bo.phase_cyc[:, :nf]) - (ro.code_m[:, :nf] - bo.code_m[:, :nf]) / wl
+        for k, f in zip(*np.nonzero(ok)):
+            key = (sats[k], int(f))
+            if key not in self.amb_index:
+                self._new_amb(key, obs_sd_cyc[k, f], INIT_AMBIGUITY_SIGMA_CYC**2)
+        if self.iono_active:
+            mapping = iono_mapping(el_r)
+            for k in np.flatnonzero(ok.any(axis=1)):
+                if sats[k] not in self.ion_index:
+                    self._new_ion(sats[k], (sigma0 * mapping[k]) ** 2)
+        groups = self._groups(sats, sys_, ok, el_r, nf)
+        n_sat_used = len({k for g in groups for k in g.sats})
+        if not groups:
+            return self._float_or_single(t, spp, age, 0, "too few common satellites above the mask")
+        dd = self._dd_index(groups, sats, nf)
+        v, H, R, kind = self._build_rows(dd, sd_phase, sd_code, los_r, wl, mu, var_sd)
+        # prefit screening
+        S_diag = np.einsum("ij,jk,ik->i", H, self.P, H) + np.diag(R)
+        m = len(dd.k)
+        phase_v = v[:m]
+        amb_sig2 = self.P[dd.i, dd.i]
+        known = amb_sig2 < AMB_KNOWN_SIGMA_CYC**2
+        bad_ph = known & (np.abs(phase_v) > np.maximum(PHASE_INNOVATION_SIGMAS * np.sqrt(S_diag[:m]), PHASE_INNOVATION_MIN_M))
+        if np.any(bad_ph):
+            # a slip: re-initialise the ambiguities involved and rebuild (the reference slipping
+            # shows as most of its group's rows failing together)
+            for key in self._slipped_keys(bad_ph, dd, sats):
+                self._drop_amb(key)
+                k = sats.index(key[0])
+                self._new_amb(key, obs_sd_cyc[k, key[1]], INIT_AMBIGUITY_SIGMA_CYC**2)
+            dd = self._dd_index(groups, sats, nf)
+            v, H, R, kind = self._build_rows(dd, sd_phase, sd_code, los_r, wl, mu, var_sd)
+        keep = ~((kind == 0) & (np.abs(v) > MAX_CODE_INNOVATION_M))
+        if not keep.all():
+            v, H, R = v[keep], H[keep], R[np.ix_(keep, keep)]
+        x_prior, P_prior = self.x.copy(), self.P.copy()
+        self._kalman_update(v, H, R)
+        # Iterated EKF step: when the update moved the position by more than RELINEARISE_M (a
+        # start from SPP), the troposphere and geometry at the rover are recomputed at the new
+        # point and the update redone from the same prior.  A few metres of height error in the
+        # linearisation point would otherwise bias the height by millimetres (tropospheric delay
+        # changes ~0.3 mm per metre of height).
+        if np.linalg.norm(self.x[:3] - x_rov) > RELINEARISE_M:
+            x_rov = self.x[:3].copy()
+            self.x, self.P = x_prior, P_prior
             phase_r, code_r, los_r, el_r = self._zero_diff(ro, x_rov, sp_r)
-            el_use = np.minimum(el_r, np.inf)
-            ok_sat = valid & (el_use >= opt.elevation_mask_rad) & np.isfinite(el_b)
             sd_phase = phase_r[:, :nf] - phase_b[:, :nf]
             sd_code = code_r[:, :nf] - code_b[:, :nf]
-            ok = ok_sat[:, None] & np.isfinite(sd_phase) & np.isfinite(sd_code) & same_wl & np.isfinite(wl)
-            var_sd = (self._variance(el_r) + self._variance(el_b))[:, None] * np.ones((1, nf))
-            # initialise missing ambiguities from code (cycles)
-            for k in range(len(ro.sats)):
-                for f in range(nf):
-                    if ok[k, f]:
-                        key = (str(ro.sats[k]), f)
-                        if key not in self.amb_index:
-                            obs_sd_phase_cyc = (ro.phase_cyc[k, f] - bo.phase_cyc[k, f])
-                            obs_sd_code_m = ro.code_m[k, f] - bo.code_m[k, f]
-                            self._new_amb(key, obs_sd_phase_cyc - obs_sd_code_m / wl[k, f],
-                                          INIT_AMBIGUITY_SIGMA_CYC**2)
-            groups = self._groups(ro.sats, sys_, ok, el_r, nf)
-            n_sat_used = len({k for g in groups for k in g.sats})
-            if not groups:
-                return self._float_or_single(t, spp, age, 0, "too few common satellites above the mask")
-            rows = self._build_rows(groups, ro.sats, sd_phase, sd_code, los_r, wl, var_sd)
-            if rows is None:
-                return self._float_or_single(t, spp, age, 0, "no double differences")
-            v, H, R, kind, keys = rows
-            # prefit screening
-            S_diag = np.einsum("ij,jk,ik->i", H, self.P, H) + np.diag(R)
-            bad = np.zeros(len(v), bool)
-            bad |= (kind == 0) & (np.abs(v) > MAX_CODE_INNOVATION_M)
-            known = np.array([self._amb_known(kk) for kk in keys])
-            bad_ph = (kind == 1) & known & (np.abs(v) > np.maximum(PHASE_INNOVATION_SIGMAS * np.sqrt(S_diag), PHASE_INNOVATION_MIN_M))
-            if np.any(bad_ph):
-                # a slip: re-initialise the ambiguities involved and rebuild (the reference slipping
-                # shows as most of its group's rows failing together)
-                for key in self._slipped_keys(bad_ph, kind, keys, groups, ro.sats):
-                    self._drop_amb(key)
-                    k = int(np.flatnonzero(ro.sats == key[0])[0])
-                    f = key[1]
-                    obs_sd_phase_cyc = (ro.phase_cyc[k, f] - bo.phase_cyc[k, f])
-                    obs_sd_code_m = ro.code_m[k, f] - bo.code_m[k, f]
-                    self._new_amb(key, obs_sd_phase_cyc - obs_sd_code_m / wl[k, f], INIT_AMBIGUITY_SIGMA_CYC**2)
-                v, H, R, kind, keys = self._build_rows(groups, ro.sats, sd_phase, sd_code, los_r, wl, var_sd)
-            keep = ~((kind == 0) & (np.abs(v) > MAX_CODE_INNOVATION_M))
-            v, H, R = v[keep], H[keep], R[np.ix_(keep, keep)]
-            x_prior, P_prior = self.x.copy(), self.P.copy()
-            self._kalman_update(v, H, R)
-            # Iterated EKF step: when the update moved the position by more than RELINEARISE_M (a
-            # start from SPP), the troposphere and geometry at the rover are recomputed at the new
-            # point and the update redone from the same prior.  A few metres of height error in the
-            # linearisation point would otherwise bias the height by millimetres (tropospheric delay
-            # changes ~0.3 mm per metre of height).
-            if np.linalg.norm(self.x[:3] - x_rov) > RELINEARISE_M:
-                x_rov = self.x[:3].copy()
-                self.x, self.P = x_prior, P_prior
-                phase_r, code_r, los_r, el_r = self._zero_diff(ro, x_rov, sp_r)
-                sd_phase = phase_r[:, :nf] - phase_b[:, :nf]
-                sd_code = code_r[:, :nf] - code_b[:, :nf]
-                v2, H2, R2, _, _ = self._build_rows(groups, ro.sats, sd_phase, sd_code, los_r, wl, var_sd)
+            v2, H2, R2, _ = self._build_rows(dd, sd_phase, sd_code, los_r, wl, mu, var_sd)
+            if not keep.all():
                 v2, H2, R2 = v2[keep], H2[keep], R2[np.ix_(keep, keep)]
-                v2 = v2 - H2[:, :3] @ (x_prior[:3] - x_rov)
-                self._kalman_update(v2, H2, R2)
-        # ambiguities seen this epoch are fresh
+            v2 = v2 - H2[:, :3] @ (x_prior[:3] - x_rov)
+            self._kalman_update(v2, H2, R2)
+        # ambiguities and ionospheres seen this epoch are fresh
         for g in groups:
             for k in g.sats:
-                key = (str(ro.sats[k]), g.slot)
+                key = (sats[k], g.slot)
                 if key in self.amb_outage:
                     self.amb_outage[key] = 0
+                if sats[k] in self.ion_outage:
+                    self.ion_outage[sats[k]] = 0
         float_pos = self.x[:3].copy()
         float_cov = self.P[:3, :3].copy()
         sol = RtkSolution(t, Status.FLOAT, float_pos, float_cov, n_sat_used, age_s=age,
@@ -507,7 +626,9 @@ class RtkFilter:
                 self.reset()
                 return self._single(t, spp, f"filter {gap:.0f} m from SPP, restarted", age)
         if opt.ambiguity_resolution:
-            self._resolve(sol, groups, ro, sd_phase, los_r, wl, x_rov)
+            self._resolve(sol, dd, sats, sd_phase, los_r, wl, mu, x_rov)
+        else:
+            self._confirm_reset()
         if not np.all(np.isfinite(sol.velocity_m_s)):
             # no dynamic model: the velocity (for RMC, odometry) comes from the rover's Dopplers
             sol.velocity_m_s, _ = doppler_velocity(rover, self.nav, sol.position_m, opt.elevation_mask_rad)
@@ -517,21 +638,20 @@ class RtkFilter:
         i = self.amb_index.get(key)
         return i is not None and self.P[i, i] < AMB_KNOWN_SIGMA_CYC**2
 
-    def _slipped_keys(self, bad, kind, keys, groups, sats):
+    def _slipped_keys(self, bad, dd: "_DD", sats):
         """Which ambiguities to reset given failing phase rows: the row's satellite, or the group's
         reference when at least half of its known rows fail."""
         out = set()
-        for g in groups:
-            ref_key = (str(sats[g.sats[0]]), g.slot)
-            idx = [r for r in range(len(keys)) if kind[r] == 1 and keys[r] is not None and keys[r][1] == g.slot
-                   and (str(sats[g.sats[0]]), g.slot) == self._row_ref.get(r)]
-            if not idx:
+        known = self.P[dd.i, dd.i] < AMB_KNOWN_SIGMA_CYC**2
+        for g in np.unique(dd.group):
+            idx = np.flatnonzero((dd.group == g) & known)
+            if len(idx) == 0:
                 continue
-            nbad = sum(bool(bad[r]) for r in idx)
+            nbad = int(np.count_nonzero(bad[idx]))
             if nbad >= max(2, (len(idx) + 1) // 2):
-                out.add(ref_key)
+                out.add((sats[dd.ref[idx[0]]], int(dd.f[idx[0]])))
             else:
-                out.update(keys[r] for r in idx if bad[r])
+                out.update((sats[dd.k[r]], int(dd.f[r])) for r in idx if bad[r])
         return out
 
     def _groups(self, sats, sys_, ok, el, nf) -> list[_Group]:
@@ -542,54 +662,68 @@ class RtkFilter:
                 if len(members) < 2:
                     continue
                 # reference: highest elevation among satellites with an established ambiguity if any
-                est = [k for k in members if self._amb_known((str(sats[k]), f))]
+                est = [k for k in members if self._amb_known((sats[k], f))]
                 pool = est if est else list(members)
                 ref = max(pool, key=lambda k: el[k])
                 groups.append(_Group([int(ref)] + [int(k) for k in members if k != ref], f))
         return groups
 
-    def _build_rows(self, groups, sats, sd_phase, sd_code, los, wl, var_sd):
+    def _dd_index(self, groups, sats, nf) -> "_DD":
+        """The epoch's double differences as index arrays (one entry per non-reference satellite and slot)."""
+        ks, refs, fs, gs = [], [], [], []
+        for gi, g in enumerate(groups):
+            n = len(g.sats) - 1
+            ks.extend(g.sats[1:])
+            refs.extend([g.sats[0]] * n)
+            fs.extend([g.slot] * n)
+            gs.extend([gi] * n)
+        k = np.array(ks, dtype=int)
+        ref = np.array(refs, dtype=int)
+        f = np.array(fs, dtype=int)
+        amb = np.array([self.amb_index[(sats[a], b)] for a, b in zip(ks, fs)], dtype=int)
+        amb_ref = np.array([self.amb_index[(sats[a], b)] for a, b in zip(refs, fs)], dtype=int)
+        if self.iono_active:
+            ion = np.array([self.ion_index[sats[a]] for a in ks], dtype=int)
+            ion_ref = np.array([self.ion_index[sats[a]] for a in refs], dtype=int)
+        else:
+            ion = ion_ref = None
+        return _DD(k, ref, f, np.array(gs, dtype=int), amb, amb_ref, ion, ion_ref)
+
+    def _build_rows(self, dd: "_DD", sd_phase, sd_code, los, wl, mu, var_sd):
+        """Innovations, design matrix and covariance of the epoch's DD phase rows then DD code rows.
+
+        The SD ranges were computed at x_rov = self.x[:3], so the linearisation point is the current
+        state and the innovations need no position term."""
         nx = len(self.x)
-        vs, Hs, kinds, keys = [], [], [], []
-        blocks = []
-        self._row_ref = {}
-        for g in groups:
-            ref = g.sats[0]
-            f = g.slot
-            ref_key = (str(sats[ref]), f)
-            iref = self.amb_index[ref_key]
-            others = g.sats[1:]
-            for kind in (1, 0):  # phase rows then code rows
-                start = len(vs)
-                for k in others:
-                    key = (str(sats[k]), f)
-                    h = np.zeros(nx)
-                    h[:3] = -(los[k] - los[ref])
-                    if kind == 1:
-                        i = self.amb_index[key]
-                        y = sd_phase[k, f] - sd_phase[ref, f]
-                        pred = wl[k, f] * self.x[i] - wl[ref, f] * self.x[iref]
-                        h[i] = wl[k, f]
-                        h[iref] = -wl[ref, f]
-                        keys.append(key)
-                        self._row_ref[len(vs)] = ref_key
-                    else:
-                        y = sd_code[k, f] - sd_code[ref, f]
-                        pred = 0.0
-                        keys.append(None)
-                    vs.append(y - pred)
-                    Hs.append(h)
-                    kinds.append(kind)
-                n = len(vs) - start
-                ratio2 = 1.0 if kind == 1 else self.opt.code_phase_ratio**2
-                Rb = np.diag([var_sd[k, f] * ratio2 for k in others]) + var_sd[ref, f] * ratio2
-                blocks.append(Rb[:n, :n])
-        if not vs:
-            return None
-        R = _block_diag(blocks)
-        # the position part of the residual: sd ranges were computed at x_rov = self.x[:3], so the
-        # linearisation point is the current state and v needs no position term
-        return np.array(vs), np.array(Hs), R, np.array(kinds), keys
+        m = len(dd.k)
+        ar = np.arange(m)
+        k, ref, f = dd.k, dd.ref, dd.f
+        geo = -(los[k] - los[ref])
+        H = np.zeros((2 * m, nx))
+        H[:m, :3] = geo
+        H[m:, :3] = geo
+        H[ar, dd.i] = wl[k, f]
+        H[ar, dd.iref] = -wl[ref, f]
+        if dd.ion is not None:
+            # phase advance -mu I, code delay +mu I (SD ionosphere on the first frequency per satellite)
+            H[ar, dd.ion] = -mu[k, f]
+            H[ar, dd.ion_ref] = mu[ref, f]
+            H[m + ar, dd.ion] = mu[k, f]
+            H[m + ar, dd.ion_ref] = -mu[ref, f]
+        y = np.concatenate((sd_phase[k, f] - sd_phase[ref, f], sd_code[k, f] - sd_code[ref, f]))
+        v = y - H[:, 3:] @ self.x[3:]
+        same = dd.group[:, None] == dd.group[None, :]
+        Rp = np.diag(var_sd[k, f]) + same * var_sd[ref, f][:, None]
+        R = np.zeros((2 * m, 2 * m))
+        R[:m, :m] = Rp
+        R[m:, m:] = Rp * self._code_phase_ratio() ** 2
+        kind = np.concatenate((np.ones(m, dtype=int), np.zeros(m, dtype=int)))
+        return v, H, R, kind
+
+    def _code_phase_ratio(self) -> float:
+        if self.opt.code_phase_ratio is not None:
+            return float(self.opt.code_phase_ratio)
+        return CODE_PHASE_ERROR_RATIO_WITH_IONOSPHERE if self.iono_active else CODE_PHASE_ERROR_RATIO
 
     def _kalman_update(self, v, H, R) -> None:
         active = np.flatnonzero(np.any(H != 0.0, axis=0) | (np.arange(len(self.x)) < self.n_kin))
@@ -602,7 +736,7 @@ class RtkFilter:
         self.P = self.P - K @ (Ha @ Pa)
         self.P = 0.5 * (self.P + self.P.T)
 
-    def _resolve(self, sol: RtkSolution, groups, ro, sd_phase, los, wl, x_lin) -> None:
+    def _resolve(self, sol: RtkSolution, dd: "_DD", sats, sd_phase, los, wl, mu, x_lin) -> None:
         """Integer ambiguity resolution on this epoch's DD ambiguities; on success `sol` becomes FIX.
 
         A fixed solution must leave DD phase residuals at the noise level.  When it does not, one
@@ -610,47 +744,80 @@ class RtkFilter:
         is left out and the search repeated, up to AR_EXCLUSION_RETRIES times.
         """
         opt = self.opt
-        rows = []  # (state index, reference state index, epoch sat index, ref sat index, slot)
-        for g in groups:
-            ref = g.sats[0]
-            iref = self.amb_index[(str(ro.sats[ref]), g.slot)]
-            for k in g.sats[1:]:
-                rows.append((self.amb_index[(str(ro.sats[k]), g.slot)], iref, k, ref, g.slot))
+        rows = np.arange(len(dd.k))
         n_all = len(rows)
         message = ""
         for _attempt in range(AR_EXCLUSION_RETRIES + 1):
             if len(rows) < opt.min_fix_ambiguities:
                 message = message or "float: too few ambiguities to fix"
                 break
-            result = self._try_fix(rows, sd_phase, los, wl, x_lin)
+            result = self._try_fix(dd, rows, sd_phase, los, wl, mu, x_lin)
             if isinstance(result, str):
                 message = result
                 if not result.startswith("float: no ambiguity subset"):
                     break
                 # nothing passed: the satellite fitting the float solution worst is the likely
                 # culprit (multipath, an undetected slip); leave it out and search again
-                res = self._phase_residuals(rows, sd_phase, los, wl, x_lin, self.x)
-                rows = [r for j, r in enumerate(rows) if j != int(np.argmax(np.abs(res)))]
+                res = self._phase_residuals(dd, rows, sd_phase, los, wl, mu, x_lin, self.x)
+                rows = np.delete(rows, int(np.argmax(np.abs(res))))
                 continue
             fix, Hc, x_fix, P_fix, res = result
             worst = int(np.argmax(np.abs(res)))
             if abs(res[worst]) <= MAX_FIXED_PHASE_RESIDUAL_M:
-                self._accept_fix(sol, fix, Hc, x_fix, P_fix, n_all)
+                count = self._confirm(dd, sats, rows, x_fix, P_fix)
+                need = self._confirm_needed()
+                if count >= need:
+                    self._accept_fix(sol, fix, Hc, x_fix, P_fix, n_all)
+                else:
+                    self.consecutive_fixes = 0
+                    sol.message = f"float: fix candidate {count}/{need} ({fix.count}/{n_all} ambiguities, ratio {fix.ratio:.1f})"
                 return
             message = f"float: fixed solution rejected (phase residual {abs(res[worst]) * 100:.1f} cm)"
             # leave the worst satellite out (its reference too if every row of the group is bad)
-            rows = [r for j, r in enumerate(rows) if j != worst]
+            rows = np.delete(rows, worst)
         self.consecutive_fixes = 0
+        self._confirm_reset()
         sol.message = message
 
-    def _try_fix(self, rows, sd_phase, los, wl, x_lin):
+    def _confirm_needed(self) -> int:
+        if self.opt.confirm_epochs is not None:
+            return max(1, int(self.opt.confirm_epochs))
+        # short baselines: the model is exact to millimetres and a validated fix is declared at once;
+        # with residual atmosphere in the model (VRS, medium range) a fix is confirmed over epochs
+        return CONFIRM_EPOCHS_WITH_IONOSPHERE if self.iono_active else 1
+
+    def _confirm_reset(self) -> None:
+        self._candidate = None
+        self._candidate_count = 0
+
+    def _confirm(self, dd: "_DD", sats, rows, x_fix, P_fix) -> int:
+        """Count consecutive epochs whose validated fixes agree: every DD ambiguity determined (sigma below
+        CONFIRM_SIGMA_CYC) in both this and the previous candidate must have the same integer."""
+        i, iref = dd.i[rows], dd.iref[rows]
+        a = x_fix[i] - x_fix[iref]
+        var = P_fix[i, i] + P_fix[iref, iref] - 2.0 * P_fix[i, iref]
+        det = var < CONFIRM_SIGMA_CYC**2
+        cand = {(sats[dd.k[r]], sats[dd.ref[r]], int(dd.f[r])): int(round(val))
+                for r, val, d in zip(rows, a, det) if d}
+        prev = self._candidate
+        agree = False
+        if prev is not None:
+            common = cand.keys() & prev.keys()
+            agree = len(common) >= self.opt.min_fix_ambiguities and all(cand[c] == prev[c] for c in common)
+        self._candidate_count = self._candidate_count + 1 if agree else 1
+        self._candidate = cand
+        return self._candidate_count
+
+    def _try_fix(self, dd: "_DD", rows, sd_phase, los, wl, mu, x_lin):
         opt = self.opt
-        idx = sorted({r[0] for r in rows} | {r[1] for r in rows})
-        pos = {i: c for c, i in enumerate(idx)}
-        D = np.zeros((len(rows), len(idx)))
-        for r, row in enumerate(rows):
-            D[r, pos[row[0]]] = 1.0
-            D[r, pos[row[1]]] = -1.0
+        i, iref = dd.i[rows], dd.iref[rows]
+        idx = np.unique(np.concatenate((i, iref)))
+        pos = np.searchsorted(idx, i)
+        pos_ref = np.searchsorted(idx, iref)
+        n = len(rows)
+        D = np.zeros((n, len(idx)))
+        D[np.arange(n), pos] = 1.0
+        D[np.arange(n), pos_ref] = -1.0
         a_dd = D @ self.x[idx]
         Q_dd = D @ self.P[np.ix_(idx, idx)] @ D.T
         try:
@@ -662,28 +829,30 @@ class RtkFilter:
         # the constraint Zs^T D a_sd = z on the full state (conditional mean and covariance)
         Hc = np.zeros((fix.count, len(self.x)))
         Hc[:, idx] = fix.Zs.T @ D
-        S = Hc @ self.P @ Hc.T
+        PHt = self.P @ Hc.T
+        S = Hc @ PHt
         try:
-            K = np.linalg.solve(S, Hc @ self.P).T
+            K = np.linalg.solve(S, PHt.T).T
         except np.linalg.LinAlgError:
             return "float: fixed-ambiguity constraint singular"
         x_fix = self.x - K @ (Hc @ self.x - fix.z_fixed)
-        P_fix = self.P - K @ Hc @ self.P
+        P_fix = self.P - K @ PHt.T
         # A partial fix of a few combinations (wide-lane-like) can pass its tests and still leave the
         # position at float precision: that is not an RTK fix and is not reported as one.
         sigma = math.sqrt(max(float(np.trace(P_fix[:3, :3])), 0.0))
         if sigma > MAX_FIXED_POSITION_SIGMA_M:
             return f"float: fixed subset ({fix.count}) leaves position sigma {sigma * 100:.0f} cm"
-        return fix, Hc, x_fix, P_fix, self._phase_residuals(rows, sd_phase, los, wl, x_lin, x_fix)
+        return fix, Hc, x_fix, P_fix, self._phase_residuals(dd, rows, sd_phase, los, wl, mu, x_lin, x_fix)
 
     @staticmethod
-    def _phase_residuals(rows, sd_phase, los, wl, x_lin, x) -> np.ndarray:
+    def _phase_residuals(dd: "_DD", rows, sd_phase, los, wl, mu, x_lin, x) -> np.ndarray:
         """DD phase residuals [m] of a state x, the rows' SD phases formed at the linearisation point."""
         dx = x[:3] - x_lin
-        r = np.array(rows)
-        i, iref, k, ref, f = (r[:, c].astype(int) for c in range(5))
+        k, ref, f = dd.k[rows], dd.ref[rows], dd.f[rows]
         y = sd_phase[k, f] - sd_phase[ref, f]
-        pred = -np.einsum("ij,j->i", los[k] - los[ref], dx) + wl[k, f] * x[i] - wl[ref, f] * x[iref]
+        pred = -(los[k] - los[ref]) @ dx + wl[k, f] * x[dd.i[rows]] - wl[ref, f] * x[dd.iref[rows]]
+        if dd.ion is not None:
+            pred = pred - mu[k, f] * x[dd.ion[rows]] + mu[ref, f] * x[dd.ion_ref[rows]]
         return y - pred
 
     def _accept_fix(self, sol, fix, Hc, x_fix, P_fix, n_all) -> None:
