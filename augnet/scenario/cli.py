@@ -1,0 +1,64 @@
+"""`augnet scenario run SCENARIO --out DIR [--duration S]`: the whole chain faster than real time, a progress
+bar while it runs, then the targets as a table; report.json, epochs.csv and the PNG plots in DIR."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from stations.scenario import ScenarioError
+
+app = typer.Typer(help="Run a scenario end to end, faster than real time: report.json + plots.",
+                  no_args_is_help=True, add_completion=False)
+
+
+def _fmt(v) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, bool):
+        return str(v)
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return str(v)
+
+
+def targets_table(report) -> Table:
+    table = Table(title=f"{report.scenario['name']}: targets", show_lines=False)
+    for col in ("target", "description", "required", "measured", "result"):
+        table.add_column(col)
+    for t in report.targets:
+        result = {True: "[green]pass[/green]", False: "[red]FAIL[/red]", None: "[yellow]n/a[/yellow]"}[t["pass"]]
+        table.add_row(t["id"], t["description"], t["target"], f"{_fmt(t['measured'])} {t['unit']}", result)
+    return table
+
+
+@app.command("run")
+def run_cmd(scenario: str = typer.Argument(..., help="built-in name (demo, baseline-10km, network-70km, "
+                                                      "iono-storm) or a scenario YAML file"),
+            out: Path = typer.Option(..., "--out", help="output folder (created)"),
+            duration: Optional[float] = typer.Option(None, "--duration", help="simulate only the first S seconds"),
+            alert_limit: Optional[float] = typer.Option(None, "--alert-limit",
+                                                        help="horizontal alert limit for the Stanford plot [m]"),
+            no_plots: bool = typer.Option(False, "--no-plots", help="report.json and epochs.csv only"),
+            strict: bool = typer.Option(False, "--strict", help="exit 1 when a target is not met"),
+            quiet: bool = typer.Option(False, "--quiet", help="no progress bar")) -> None:
+    """Simulate SCENARIO (stations -> centre -> VRS -> onboard units) and compare every figure with the truth."""
+    from augnet.scenario.runner import run
+
+    console = Console()
+    try:
+        rep = run(scenario, out, duration_s=duration, progress=not quiet, plots=not no_plots,
+                  alert_limit_m=alert_limit)
+    except ScenarioError as exc:
+        console.print(f"[red]error:[/red] {exc}")
+        raise typer.Exit(2) from None
+    console.print(targets_table(rep))
+    r = rep.run
+    console.print(f"{r['epochs']} epochs in {r['wall_s']:.1f} s ({_fmt(r['real_time_factor'])}x real time); "
+                  f"wrote {', '.join(rep.files)} to {out}")
+    if strict and not rep.passed:
+        raise typer.Exit(1)
