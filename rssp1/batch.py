@@ -113,6 +113,8 @@ def _offsets(lengths: Sequence[int], extra: int) -> np.ndarray:
 
 def timestamp_run(t: tuple[int, int], n: int) -> np.ndarray:
     """(n, 2) int64: both channels' T(k), T(k + 1), ..., T(k + n - 1) from T(k) = t."""
+    if not all(0 <= int(x) <= 0xFFFFFFFF for x in t) or len(t) != 2:
+        raise ValueError("t: a pair of 32-bit words expected")
     out = np.empty((n, 2), dtype=np.int64)
     if _kernels is not None:
         _kernels.timestamp_run(_LFSR_TABLES, int(t[0]), int(t[1]), out)

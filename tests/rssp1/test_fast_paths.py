@@ -230,6 +230,10 @@ def test_batch_argument_checks():
         batch.encode_rsds([b"a"], source=1, destination=1, tc=-1, sid=(1, 2), t=(3, 4))
     with pytest.raises(ValueError):
         batch.verify_rsds([b"a"], sid=(1, 2, 3))
+    with pytest.raises(ValueError):
+        batch.timestamp_run((1 << 32, 0), 3)
+    with pytest.raises(ValueError):
+        batch.verify_rsds([b"a"], sid=(-1, 2))
     assert batch.encode_rsds([], source=1, destination=1, tc=0, sid=(1, 2), t=(3, 4)) == []
     assert batch.verify_rsds([], sid=(1, 2)).reasons() == []
 
