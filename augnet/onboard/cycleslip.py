@@ -21,6 +21,12 @@ from augnet.onboard.observations import LLI_SLIP, EpochObs
 GF_SLIP_THRESHOLD_M = 0.05
 # Allowed geometry-free drift per second of interval [m/s] (ionospheric rate, generous).
 GF_DRIFT_M_S = 0.01
+# A reference station (or a VRS, which carries its master station's data) is static and geodetic: its
+# geometry-free combination moves only with the ionosphere (mm/s) and mm-level noise, so a tighter test
+# catches jumps a rover's test would miss -- e.g. a VRS whose satellite switches from single-base to
+# network-corrected data, a dispersive step of several cm with no loss-of-lock flag.
+BASE_GF_SLIP_THRESHOLD_M = 0.025
+BASE_GF_DRIFT_M_S = 0.005
 # Phase vs integrated Doppler, after removing the common (clock) part [cycles]; Doppler noise and
 # the averaging error of a train's acceleration stay far below this.
 DOPPLER_SLIP_THRESHOLD_CYC = 5.0
@@ -32,8 +38,11 @@ MAX_ARC_GAP_S = 10.0
 class SlipDetector:
     """Keeps the previous epoch per satellite and flags slips in the next one."""
 
-    def __init__(self, max_gap_s: float = MAX_ARC_GAP_S):
+    def __init__(self, max_gap_s: float = MAX_ARC_GAP_S, gf_threshold_m: float = GF_SLIP_THRESHOLD_M,
+                 gf_drift_m_s: float = GF_DRIFT_M_S):
         self.max_gap_s = max_gap_s
+        self.gf_threshold_m = gf_threshold_m
+        self.gf_drift_m_s = gf_drift_m_s
         self._prev: dict[str, tuple[float, np.ndarray, np.ndarray, float]] = {}
 
     def reset(self) -> None:
@@ -66,7 +75,7 @@ class SlipDetector:
             slip[i] |= np.isfinite(obs.phase_cyc[i]) & ~np.isfinite(ph0)
         dt_all = obs.time - prev_t
         jump = np.abs(gf - prev_gf)
-        gf_slip = jump > GF_SLIP_THRESHOLD_M + GF_DRIFT_M_S * np.nan_to_num(dt_all, nan=0.0)
+        gf_slip = jump > self.gf_threshold_m + self.gf_drift_m_s * np.nan_to_num(dt_all, nan=0.0)
         slip |= gf_slip[:, None] & np.isfinite(obs.phase_cyc)
         for f in range(nf):
             col = dop_disc[:, f]

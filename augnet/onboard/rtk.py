@@ -38,7 +38,7 @@ from augnet.gnss.ambiguity import (
 from augnet.gnss.ephemeris import NavigationData
 from augnet.gnss.geometry import azimuth_elevation, ecef_to_geodetic, enu_rotation
 from augnet.onboard.atmosphere import saastamoinen_m
-from augnet.onboard.cycleslip import SlipDetector
+from augnet.onboard.cycleslip import BASE_GF_DRIFT_M_S, BASE_GF_SLIP_THRESHOLD_M, SlipDetector
 from augnet.onboard.observations import BAND_FREQ_HZ, SYSTEM_BANDS, EpochObs
 from augnet.onboard.spp import (
     SppOptions,
@@ -261,7 +261,7 @@ class RtkFilter:
         self.initialised = False
         self.t_prev = math.nan
         self.rover_slips = SlipDetector()
-        self.base_slips = SlipDetector()
+        self.base_slips = SlipDetector(gf_threshold_m=BASE_GF_SLIP_THRESHOLD_M, gf_drift_m_s=BASE_GF_DRIFT_M_S)
         self.consecutive_fixes = 0
         self.last_fix: tuple[PartialFix, np.ndarray, np.ndarray] | None = None
         self._base_checked_time = math.nan
@@ -626,7 +626,7 @@ class RtkFilter:
                 self.reset()
                 return self._single(t, spp, f"filter {gap:.0f} m from SPP, restarted", age)
         if opt.ambiguity_resolution:
-            self._resolve(sol, dd, sats, sd_phase, los_r, wl, mu, x_rov)
+            self._resolve(sol, dd, sats, sd_phase, los_r, wl, mu, x_rov, el_r)
         else:
             self._confirm_reset()
         if not np.all(np.isfinite(sol.velocity_m_s)):
@@ -736,12 +736,15 @@ class RtkFilter:
         self.P = self.P - K @ (Ha @ Pa)
         self.P = 0.5 * (self.P + self.P.T)
 
-    def _resolve(self, sol: RtkSolution, dd: "_DD", sats, sd_phase, los, wl, mu, x_lin) -> None:
+    def _resolve(self, sol: RtkSolution, dd: "_DD", sats, sd_phase, los, wl, mu, x_lin, el) -> None:
         """Integer ambiguity resolution on this epoch's DD ambiguities; on success `sol` becomes FIX.
 
         A fixed solution must leave DD phase residuals at the noise level.  When it does not, one
         satellite's phase is usually at fault (multipath, a slip too small to detect): the worst row
-        is left out and the search repeated, up to AR_EXCLUSION_RETRIES times.
+        is left out and the search repeated, up to AR_EXCLUSION_RETRIES times.  When no subset passes
+        at all: without the ionosphere in the model the satellite fitting the float worst is left out;
+        with it (float residuals then say little, the ionosphere states absorb them) the lowest
+        satellite is, as its ionosphere prior is the loosest (partial resolution by elevation).
         """
         opt = self.opt
         rows = np.arange(len(dd.k))
@@ -754,6 +757,14 @@ class RtkFilter:
             result = self._try_fix(dd, rows, sd_phase, los, wl, mu, x_lin)
             if isinstance(result, str):
                 message = result
+                if self.iono_active:
+                    if not (result.startswith("float: no ambiguity subset") or "leaves position sigma" in result):
+                        break
+                    # partial resolution by elevation: the lowest satellite has the loosest ionosphere
+                    # and the most multipath; leave it (every slot) out and search again
+                    low = dd.k[rows][np.argmin(el[dd.k[rows]])]
+                    rows = rows[dd.k[rows] != low]
+                    continue
                 if not result.startswith("float: no ambiguity subset"):
                     break
                 # nothing passed: the satellite fitting the float solution worst is the likely
