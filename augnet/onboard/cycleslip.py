@@ -63,7 +63,7 @@ class SlipDetector:
                 continue
             t0, ph0, d0, g0 = p
             dt = obs.time - t0
-            if dt <= 0.0 or dt > self.max_gap_s:
+            if dt < 0.0 or dt > self.max_gap_s:
                 slip[i] |= np.isfinite(obs.phase_cyc[i])
                 continue
             prev_t[i] = t0
