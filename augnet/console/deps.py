@@ -7,7 +7,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Annotated
 
-from fastapi import Depends, HTTPException, Request, status
+from fastapi import Depends, HTTPException, Path, Request, status
 from fastapi.exceptions import RequestValidationError
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy.orm import Session
@@ -15,6 +15,10 @@ from sqlalchemy.orm import Session
 from augnet.console.live import LiveState
 from augnet.store import queries as q
 from augnet.store.models import Role
+
+# Names and codes in paths: anything printable the store could hold (NUL is refused by PostgreSQL text).
+MAX_KEY_CHARS = 128
+Key = Annotated[str, Path(min_length=1, max_length=MAX_KEY_CHARS, pattern=r"^[^\x00]+$")]
 
 bearer = HTTPBearer(auto_error=False, description="API token from POST /api/auth/login")
 

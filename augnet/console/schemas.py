@@ -8,7 +8,7 @@ from __future__ import annotations
 import datetime as dt
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, StringConstraints
+from pydantic import BaseModel, ConfigDict, Field, StringConstraints, field_validator
 
 from augnet.store.models import AlarmState, Role, Severity
 
@@ -36,6 +36,14 @@ RtcmStationId = Annotated[int, Field(ge=0, le=RTCM_STATION_ID_MAX)]
 
 class Request(BaseModel):
     model_config = ConfigDict(extra="forbid")
+
+    @field_validator("*", mode="after")
+    @classmethod
+    def no_nul(cls, value: Any) -> Any:
+        """PostgreSQL text cannot hold NUL; refuse it here, naming the field, on every backend alike."""
+        if isinstance(value, str) and "\x00" in value:
+            raise ValueError("must not contain the NUL character")
+        return value
 
 
 # --- auth and operators -----------------------------------------------------------------------------

@@ -40,7 +40,7 @@ def postgres_url():
     admin.dispose()
 
 
-def _empty(sessions) -> None:
+def empty_store(sessions) -> None:
     with sessions.begin() as s:
         for table in reversed(Base.metadata.sorted_tables):
             s.execute(table.delete())
@@ -55,7 +55,7 @@ def sessions(request, tmp_path):
         factory.kw["bind"].dispose()
         return
     factory = open_store(request.getfixturevalue("postgres_url"))
-    _empty(factory)
+    empty_store(factory)
     yield factory
     factory.kw["bind"].dispose()
 

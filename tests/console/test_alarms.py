@@ -55,6 +55,8 @@ def test_bad_alarm_id_is_422(sqlite_console):
     c = sqlite_console
     assert "alarm_id" in error_fields(c.client.get("/api/alarms/abc", headers=c.as_("vera")))
     assert "alarm_id" in error_fields(c.client.post("/api/alarms/abc/acknowledge", headers=c.as_("otto")))
+    assert "alarm_id" in error_fields(c.client.get(f"/api/alarms/{2**31}", headers=c.as_("vera")))
+    assert "alarm_id" in error_fields(c.client.get("/api/alarms/0", headers=c.as_("vera")))
 
 
 def test_acknowledge_by_operator_audited_and_pushed(console):

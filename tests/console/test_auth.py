@@ -173,3 +173,11 @@ def test_ensure_admin_random_password_logs_in(sqlite_sessions):
         r = client.post("/api/auth/login", json={"name": "admin", "password": boot.password})
         assert r.status_code == 200 and r.json()["role"] == "admin"
         assert client.get("/api/operators", headers={"Authorization": f"Bearer {boot.token}"}).status_code == 200
+
+
+def test_nul_characters_are_422_on_every_backend(console):
+    c = console
+    r = c.client.post("/api/auth/login", json={"name": "ot\x00to", "password": "x"})
+    assert "name" in error_fields(r)
+    assert "code" in error_fields(c.client.get("/api/stations/A%00B", headers=c.as_("vera")))
+    assert "subject" in error_fields(c.client.get("/api/quality", params={"subject": "S\x00"}, headers=c.as_("vera")))

@@ -44,6 +44,18 @@ def driver(tmp_path):
     d.quit()
 
 
+def attribute(driver, selector: str, name: str) -> str | None:
+    """One attribute read inside the page (the diagram re-renders often: element handles go stale)."""
+    return driver.execute_script("const e = document.querySelector(arguments[0]);"
+                                 "return e ? e.getAttribute(arguments[1]) : null;", selector, name)
+
+
+def text(driver, selector: str) -> str:
+    """An element's text with its cells joined by single spaces ('' when absent)."""
+    return driver.execute_script("const e = document.querySelector(arguments[0]);"
+                                 "return e ? e.innerText.replace(/\\s+/g, ' ').trim() : '';", selector)
+
+
 class MovingTrains:
     """The running system's stand-in for this test: a worker thread advancing trains along the line."""
 
@@ -92,24 +104,31 @@ def test_page_trains_move_and_acknowledge_updates_page_and_audit(driver, sqlite_
             assert not driver.find_element(By.ID, "login").is_displayed()
             wait.until(lambda d: d.find_element(By.ID, "feed-status").text == "live")
             wait.until(lambda d: len(d.find_elements(By.CSS_SELECTOR, "#layer-stations g.station")) == 3)
-            assert driver.find_element(By.CSS_SELECTOR, 'g[data-station="STA3"]').get_attribute("class") == \
-                "station down"
-            assert driver.find_element(By.CSS_SELECTOR, 'path[data-baseline="STA1-STA2"]').get_attribute("class") \
-                == "baseline fixed"
-            assert driver.find_element(By.CSS_SELECTOR, 'path[data-baseline="STA2-STA3"]').get_attribute("class") \
-                == "baseline none"
+            assert attribute(driver, 'g[data-station="STA3"]', "class") == "station down"
+            assert attribute(driver, 'g[data-station="STA1"]', "class") == "station up"
+            assert attribute(driver, 'path[data-baseline="STA1-STA2"]', "class") == "baseline fixed"
+            assert attribute(driver, 'path[data-baseline="STA2-STA3"]', "class") == "baseline none"
 
             # trains move on the diagram and in the table
             marker = 'g.train[data-train="T1"]'
             wait.until(lambda d: d.find_elements(By.CSS_SELECTOR, marker))
-            first = driver.find_element(By.CSS_SELECTOR, marker).get_attribute("transform")
-            first_km = float(driver.find_element(By.CSS_SELECTOR, marker).get_attribute("data-along-km"))
-            wait.until(lambda d: d.find_element(By.CSS_SELECTOR, marker).get_attribute("transform") != first)
-            later_km = float(driver.find_element(By.CSS_SELECTOR, marker).get_attribute("data-along-km"))
-            assert later_km > first_km
-            assert "train float" == driver.find_element(By.CSS_SELECTOR, 'g.train[data-train="T2"]') \
-                .get_attribute("class")
-            assert driver.find_elements(By.CSS_SELECTOR, '#trains tr[data-train="T1"]')
+            def position(d):  # the marker's transform and km, read together (renders run between reads)
+                return d.execute_script(
+                    "const g = document.querySelector(arguments[0]);"
+                    "return [g.getAttribute('transform'), parseFloat(g.getAttribute('data-along-km'))];", marker)
+
+            first_transform, first_km = position(driver)
+            wait.until(lambda d: position(d)[1] > first_km)
+            later_transform, later_km = position(driver)
+            assert later_transform != first_transform
+            x = [float(t.split("(")[1].split(",")[0]) for t in (first_transform, later_transform)]
+            assert x[1] > x[0]  # moved right along the line
+            assert attribute(driver, 'g.train[data-train="T2"]', "class") == "train float"
+            # the train table shows the same km as the marker (both drawn in one frame from one state)
+            table_km, marker_km = driver.execute_script(
+                "return [document.querySelector('#trains tr[data-train=\"T1\"] td.num').textContent,"
+                " document.querySelector(arguments[0]).getAttribute('data-along-km')];", marker)
+            assert float(table_km) == float(marker_km) >= later_km
 
             # the system raises an alarm in the store; the page shows it; the operator acknowledges it
             with sqlite_sessions.begin() as s:
@@ -120,11 +139,10 @@ def test_page_trains_move_and_acknowledge_updates_page_and_audit(driver, sqlite_
             wait.until(lambda d: d.find_elements(By.CSS_SELECTOR, button))
             driver.find_element(By.CSS_SELECTOR, button).click()
             row = f'#alarms tr[data-alarm="{alarm_id}"]'
-            wait.until(lambda d: d.find_element(By.CSS_SELECTOR, row).get_attribute("data-state") == "acknowledged")
+            wait.until(lambda d: attribute(d, row, "data-state") == "acknowledged")
             assert not driver.find_elements(By.CSS_SELECTOR, button)
-            assert driver.find_element(By.CSS_SELECTOR, row + " td.alarm-state").text == "acknowledged"
-            wait.until(lambda d: any("alarm.acknowledge" in r.text and "otto" in r.text
-                                     for r in d.find_elements(By.CSS_SELECTOR, "#audit tbody tr")))
+            assert text(driver, row + " td.alarm-state") == "acknowledged"
+            wait.until(lambda d: "otto alarm.acknowledge alarm:" in text(d, "#audit tbody"))
             driver.save_screenshot(str(tmp_path / "console.png"))
         finally:
             trains.stop.set()

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Query
+from fastapi import APIRouter, Path, Query
 
 from augnet.console.deps import DB, Live, OperatorRole, Viewer, utc
 from augnet.console.schemas import AlarmOut
@@ -14,6 +14,8 @@ from augnet.store.models import Alarm
 router = APIRouter(prefix="/alarms", tags=["alarms"])
 MAX_ALARMS_PER_PAGE = 1000
 NOT_FOUND = {404: {"description": "no such alarm"}}
+SQL_INTEGER_MAX = 2**31 - 1  # alarm ids are SQL INTEGER (4 bytes on PostgreSQL)
+AlarmId = Annotated[int, Path(ge=1, le=SQL_INTEGER_MAX)]
 
 
 def alarm_out(a: Alarm) -> AlarmOut:
@@ -30,12 +32,12 @@ def list_alarms(who: Viewer, session: DB, include_cleared: bool = False,
 
 
 @router.get("/{alarm_id}", response_model=AlarmOut, responses=NOT_FOUND)
-def get_alarm(alarm_id: int, who: Viewer, session: DB) -> AlarmOut:
+def get_alarm(alarm_id: AlarmId, who: Viewer, session: DB) -> AlarmOut:
     return alarm_out(q.get_alarm(session, alarm_id))
 
 
 @router.post("/{alarm_id}/acknowledge", response_model=AlarmOut, responses=NOT_FOUND)
-def acknowledge(alarm_id: int, who: OperatorRole, session: DB, live: Live) -> AlarmOut:
+def acknowledge(alarm_id: AlarmId, who: OperatorRole, session: DB, live: Live) -> AlarmOut:
     """Acknowledge a raised alarm (operator or admin; audited). Acknowledging an alarm already acknowledged
     or cleared changes nothing and returns it as it is."""
     before = q.get_alarm(session, alarm_id).state

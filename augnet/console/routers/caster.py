@@ -7,7 +7,7 @@ import logging
 
 from fastapi import APIRouter, Response, status
 
-from augnet.console.deps import DB, Admin, Live, Viewer, field_error
+from augnet.console.deps import Admin, DB, Key, Live, Viewer, field_error
 from augnet.console.live import LiveState, json_safe
 from augnet.console.schemas import (
     CasterOut,
@@ -79,7 +79,7 @@ def add_mountpoint(body: MountpointIn, who: Admin, session: DB, live: Live) -> M
 
 
 @router.patch("/mountpoints/{name}", response_model=MountpointOut, responses={404: {"description": "no such mountpoint"}})
-def edit_mountpoint(name: str, body: MountpointPatch, who: Admin, session: DB, live: Live) -> MountpointOut:
+def edit_mountpoint(name: Key, body: MountpointPatch, who: Admin, session: DB, live: Live) -> MountpointOut:
     given = body.model_dump(exclude_unset=True)
     if not given:
         raise field_error("kind", "give at least one field to change")
@@ -128,7 +128,7 @@ def add_user(body: CasterUserIn, who: Admin, session: DB, live: Live) -> CasterU
 
 
 @router.patch("/users/{name}", response_model=CasterUserOut, responses={404: {"description": "no such user"}})
-def edit_user(name: str, body: CasterUserPatch, who: Admin, session: DB, live: Live) -> CasterUserOut:
+def edit_user(name: Key, body: CasterUserPatch, who: Admin, session: DB, live: Live) -> CasterUserOut:
     given = body.model_dump(exclude_unset=True)
     if not given:
         raise field_error("groups", "give at least one field to change")
@@ -146,7 +146,7 @@ def edit_user(name: str, body: CasterUserPatch, who: Admin, session: DB, live: L
 
 @router.delete("/users/{name}", status_code=status.HTTP_204_NO_CONTENT,
                responses={404: {"description": "no such user"}})
-def delete_user(name: str, who: Admin, session: DB, live: Live) -> Response:
+def delete_user(name: Key, who: Admin, session: DB, live: Live) -> Response:
     q.delete_caster_user(session, who.name, name)
     session.commit()
     _tell_system(live, "user", name, {"action": "delete"})

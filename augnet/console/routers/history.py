@@ -18,7 +18,7 @@ MAX_AUDIT_ENTRIES = 1_000
 
 @router.get("/quality", response_model=list[QualityOut])
 def quality(who: Viewer, session: DB,
-            subject: Annotated[str | None, Query(max_length=64, description='"STA1-STA2" or "STA1"')] = None,
+            subject: Annotated[str | None, Query(max_length=64, pattern=r"^[^\x00]*$", description='"STA1-STA2" or "STA1"')] = None,
             since: Annotated[dt.datetime | None, Query(description="ISO 8601; naive times are UTC")] = None,
             limit: Annotated[int, Query(ge=1, le=MAX_QUALITY_SAMPLES)] = 1000) -> list[QualityOut]:
     """Quality samples, oldest first: fixed fraction, residual RMS [m], satellites, per baseline or station."""

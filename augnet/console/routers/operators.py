@@ -5,7 +5,7 @@ from __future__ import annotations
 from fastapi import APIRouter, HTTPException, status
 from sqlalchemy import func, select
 
-from augnet.console.deps import DB, Admin, field_error
+from augnet.console.deps import Admin, DB, Key, field_error
 from augnet.console.schemas import OperatorIn, OperatorOut, OperatorPatch
 from augnet.console.security import hash_password
 from augnet.store import queries as q
@@ -33,7 +33,7 @@ def add_operator(body: OperatorIn, who: Admin, session: DB) -> OperatorOut:
 
 @router.patch("/{name}", response_model=OperatorOut,
               responses={404: {"description": "no such operator"}, 409: {"description": "last admin"}})
-def edit_operator(name: str, body: OperatorPatch, who: Admin, session: DB) -> OperatorOut:
+def edit_operator(name: Key, body: OperatorPatch, who: Admin, session: DB) -> OperatorOut:
     """Change role, enabled flag or password. Disabling or a new password revokes the operator's tokens.
     The last enabled admin can be neither demoted nor disabled (nobody could manage accounts after)."""
     if body.role is None and body.enabled is None and body.password is None:

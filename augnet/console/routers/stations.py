@@ -11,7 +11,7 @@ import logging
 from fastapi import APIRouter, status
 
 from augnet.console import geo
-from augnet.console.deps import DB, Admin, Live, OperatorRole, Viewer, field_error
+from augnet.console.deps import Admin, DB, Key, Live, OperatorRole, Viewer, field_error
 from augnet.console.live import LiveState, StationLive
 from augnet.console.schemas import StationIn, StationLiveOut, StationOut, StationPatch
 from augnet.store import queries as q
@@ -60,7 +60,7 @@ def list_stations(who: Viewer, session: DB, live: Live) -> list[StationOut]:
 
 
 @router.get("/{code}", response_model=StationOut, responses=NOT_FOUND)
-def get_station(code: str, who: Viewer, session: DB, live: Live) -> StationOut:
+def get_station(code: Key, who: Viewer, session: DB, live: Live) -> StationOut:
     sl = live.stations.get(code)
     try:
         st = q.get_station(session, code)
@@ -84,7 +84,7 @@ def add_station(body: StationIn, who: Admin, session: DB, live: Live) -> Station
 
 
 @router.patch("/{code}", response_model=StationOut, responses=NOT_FOUND)
-def edit_station(code: str, body: StationPatch, who: Admin, session: DB, live: Live) -> StationOut:
+def edit_station(code: Key, body: StationPatch, who: Admin, session: DB, live: Live) -> StationOut:
     """Change any of name, position (any of lat/lon/h; the others are kept), RTCM id, mountpoint, enabled."""
     given = body.model_dump(exclude_unset=True)
     if not given:
@@ -114,11 +114,11 @@ def _set_enabled(code: str, enabled: bool, who, session, live: LiveState) -> Sta
 
 
 @router.post("/{code}/disable", response_model=StationOut, responses=NOT_FOUND)
-def disable_station(code: str, who: OperatorRole, session: DB, live: Live) -> StationOut:
+def disable_station(code: Key, who: OperatorRole, session: DB, live: Live) -> StationOut:
     """Take a station out of the network solution (operator or admin)."""
     return _set_enabled(code, False, who, session, live)
 
 
 @router.post("/{code}/enable", response_model=StationOut, responses=NOT_FOUND)
-def enable_station(code: str, who: OperatorRole, session: DB, live: Live) -> StationOut:
+def enable_station(code: Key, who: OperatorRole, session: DB, live: Live) -> StationOut:
     return _set_enabled(code, True, who, session, live)

@@ -7,7 +7,7 @@ import time
 
 from fastapi import APIRouter, HTTPException, status
 
-from augnet.console.deps import DB, Live, Viewer, utc
+from augnet.console.deps import DB, Key, Live, Viewer, utc
 from augnet.console.live import TrainLive, as_dict
 from augnet.console.schemas import TrainDetailOut, TrainOut, TrainSessionOut
 from augnet.store import queries as q
@@ -31,7 +31,7 @@ def list_trains(who: Viewer, live: Live) -> list[TrainOut]:
 
 
 @router.get("/{train_id}", response_model=TrainDetailOut, responses={404: {"description": "unknown train"}})
-def get_train(train_id: str, who: Viewer, session: DB, live: Live) -> TrainDetailOut:
+def get_train(train_id: Key, who: Viewer, session: DB, live: Live) -> TrainDetailOut:
     t = live.trains.get(train_id)
     registered = session.scalar(select(Train).where(Train.code == train_id))
     if t is None and registered is None:

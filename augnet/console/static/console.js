@@ -26,6 +26,7 @@ const state = {
   ws: null,
   pollTimer: null,
   renderQueued: false,
+  dirty: new Set(),      // what changed since the last frame: "trains" alone is the frequent case
 };
 
 const $ = (id) => document.getElementById(id);
@@ -122,6 +123,7 @@ function mergeLiveStation(st) {
 }
 
 function applyEvent(ev) {
+  state.dirty.add(ev.type === "train" || ev.type === "train.removed" ? "trains" : "all");
   switch (ev.type) {
     case "snapshot": applySnapshot(ev); break;
     case "train": state.trains.set(ev.train.id, ev.train); break;
@@ -161,7 +163,7 @@ function startPolling() {
   setFeed("polling");
   const started = Date.now();
   const tick = async () => {
-    try { applySnapshot(await api("GET", "/api/live/snapshot")); queueRender(); } catch (e) { /* next tick */ }
+    try { applySnapshot(await api("GET", "/api/live/snapshot")); queueRender("all"); } catch (e) { /* next tick */ }
     if (!state.token) return;
     if (Date.now() - started >= WS_RETRY_MS) { connectFeed(); return; }
     state.pollTimer = setTimeout(tick, POLL_INTERVAL_MS);
@@ -182,7 +184,7 @@ async function refreshStations() {
       const cur = state.stations.get(s.code) || {};
       state.stations.set(s.code, Object.assign(cur, s, { live: s.live || cur.live }));
     }
-    queueRender();
+    queueRender("all");
   } catch (e) { console.warn(e); }
 }
 
@@ -213,14 +215,18 @@ async function setStationEnabled(code, enabled) {
 
 // ---- rendering ---------------------------------------------------------------------------------------
 
-function queueRender() {
+function queueRender(part) {
+  if (part) state.dirty.add(part);
   if (state.renderQueued) return;
   state.renderQueued = true;
   requestAnimationFrame(() => { state.renderQueued = false; render(); });
 }
 
 function render() {
-  renderSummary(); renderDiagram(); renderTrains(); renderStations();
+  const all = state.dirty.has("all");
+  state.dirty.clear();
+  if (all) { renderSummary(); renderStatic(); renderStations(); }
+  renderTrainMarkers(); renderTrains();
 }
 
 function renderSummary() {
@@ -247,8 +253,9 @@ function xOf(km, length) {
   return DIAGRAM.left + (DIAGRAM.right - DIAGRAM.left) * Math.min(Math.max(km / length, 0), 1);
 }
 
-function renderDiagram() {
+function renderStatic() {
   const length = lineLength();
+  state.drawnLength = length;
   $("line-name").textContent = state.line && state.line.id ? state.line.id + " · " + fmt(length, 1) + " km" : "";
   // track and km ticks
   const track = $("layer-track");
@@ -290,8 +297,12 @@ function renderDiagram() {
     bl.push(p);
   }
   $("layer-baselines").replaceChildren(...bl);
+}
 
-  // trains: markers moved in place (kept across renders so the page does not flicker)
+function renderTrainMarkers() {
+  // markers are moved in place (kept across renders so the page does not flicker)
+  if (state.drawnLength === undefined || lineLength() !== state.drawnLength) renderStatic();
+  const length = state.drawnLength;
   const layer = $("layer-trains");
   const seen = new Set();
   for (const t of state.trains.values()) {
