@@ -61,7 +61,7 @@ class VrsEpoch:
     cnr_dbhz: np.ndarray  # (T, S, 2)
     lli: np.ndarray  # (T, S, 2) int8
     corrected: np.ndarray  # (T, S) bool: network corrections applied
-    model: np.ndarray  # (T, S) int8: interpolation model (0 plane, 1 along-line, 2 distance, -1 none)
+    model: np.ndarray  # (T, S) int8: interpolation model (interpolation.MODEL_CODES; -1 none)
     distance_to_master_m: np.ndarray  # (T,)
     flags: dict = field(default_factory=dict)
 

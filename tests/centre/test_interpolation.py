@@ -7,10 +7,13 @@ import numpy as np
 import pytest
 
 from augnet.centre.interpolation import (
+    MAX_CROSS_LINE_DISTANCE_M,
+    MODEL_CODES,
     InterpolationError,
     Model,
     distance_weights,
     interpolate,
+    kriging_weights,
     leave_one_out,
     plane_weights,
     select_model,
@@ -26,7 +29,7 @@ OFF_LINE = np.array([[60e3, 28e3], [150e3, -25e3]])
 def test_collinear_railway_is_detected_and_off_line_stations_restore_2d():
     assert spread_ratio(LINE) < 0.1
     assert select_model(LINE) is Model.ALONG_LINE
-    assert select_model(np.vstack([LINE, OFF_LINE])) is Model.PLANE
+    assert select_model(np.vstack([LINE, OFF_LINE])) is Model.KRIGING
     assert select_model(LINE[:2]) is Model.ALONG_LINE
     assert select_model(LINE[:1]) is Model.DISTANCE
 
@@ -40,6 +43,45 @@ def test_plane_model_is_exact_for_a_planar_field():
     corr, codes = interpolate(sta, rovers, V, Model.PLANE)
     np.testing.assert_allclose(corr, (rovers - sta[0]) @ grad, atol=1e-12)
     assert np.all(codes == 0)
+
+
+def test_kriging_is_exact_for_a_planar_field_and_at_every_station():
+    """Universal kriging with a linear drift: any plane is reproduced (with its offset), and a rover on a
+    station gets that station's residual, whatever the field."""
+    rng = np.random.default_rng(11)
+    sta = np.vstack([LINE, OFF_LINE])
+    grad = rng.normal(size=(2, 30)) * 1e-7
+    V = (sta - sta[0]) @ grad
+    rovers = rng.uniform([0, -20e3], [210e3, 20e3], size=(300, 2))
+    corr, codes = interpolate(sta, rovers, V)
+    np.testing.assert_allclose(corr, (rovers - sta[0]) @ grad, atol=1e-10)
+    assert np.all(codes == MODEL_CODES[Model.KRIGING])
+    W = kriging_weights(sta, sta)
+    np.testing.assert_allclose(W, np.eye(len(sta)), atol=1e-8)
+    rough = rng.normal(scale=0.05, size=(len(sta), 5))
+    rough[0] = 0.0
+    np.testing.assert_allclose(interpolate(sta, sta, rough)[0], rough, atol=1e-8)
+
+
+def test_kriging_weighs_the_corners_of_a_square_equally_at_its_centre():
+    """In the middle of a network the stations count alike (the plane through the master alone gives the
+    master and its opposite station twice the weight of the other two)."""
+    square = np.array([[0.0, 0.0], [35e3, -35e3], [0.0, -70e3], [-35e3, -35e3]])
+    centre = np.array([[0.0, -35e3]])
+    np.testing.assert_allclose(kriging_weights(square, centre), [[0.25] * 4], atol=1e-9)
+    np.testing.assert_allclose(plane_weights(square, centre), [[0.0, 1 / 6, 1 / 3, 1 / 6]], atol=1e-9)
+
+
+def test_along_line_gives_no_correction_far_across_the_line():
+    """Two stations only (a satellite fixed on one baseline): the model knows nothing across their line."""
+    sta = np.array([[0.0, 0.0], [50e3, 0.0]])
+    V = np.array([[0.0], [0.03]])
+    near = np.array([[25e3, 0.5 * MAX_CROSS_LINE_DISTANCE_M]])
+    far = np.array([[25e3, 2.0 * MAX_CROSS_LINE_DISTANCE_M]])
+    c_near, code = interpolate(sta, near, V)
+    c_far, code_far = interpolate(sta, far, V)
+    assert abs(c_near[0, 0] - 0.015) < 1e-12 and code[0] == MODEL_CODES[Model.ALONG_LINE]
+    assert np.isnan(c_far[0, 0]) and code_far[0] == MODEL_CODES[Model.ALONG_LINE]
 
 
 def test_plane_model_refuses_collinear_stations():
@@ -113,7 +155,7 @@ def test_missing_residuals_use_the_stations_that_have_them():
     corr, codes = interpolate(sta, rover, V)
     exact = float(((rover - sta[0]) @ grad)[0, 0])
     np.testing.assert_allclose(corr[0, :2], exact, atol=1e-12)
-    assert list(codes) == [0, 0, 1]
+    assert list(codes) == [MODEL_CODES[Model.KRIGING]] * 2 + [MODEL_CODES[Model.ALONG_LINE]]
     assert abs(corr[0, 2] - exact) < 0.01
 
 
