@@ -27,12 +27,13 @@ def _fmt(v) -> str:
 
 
 def targets_table(report) -> Table:
-    table = Table(title=f"{report.scenario['name']}: targets", show_lines=False)
-    for col in ("target", "description", "required", "measured", "result"):
-        table.add_column(col)
+    """One row per target (report.json's `targets` says what each one is)."""
+    table = Table(title=f"{report.scenario['name']}: targets (report.json: 'targets')", show_lines=False)
+    for col in ("target", "required", "measured", "unit", "result"):
+        table.add_column(col, no_wrap=True)
     for t in report.targets:
         result = {True: "[green]pass[/green]", False: "[red]FAIL[/red]", None: "[yellow]n/a[/yellow]"}[t["pass"]]
-        table.add_row(t["id"], t["description"], t["target"], f"{_fmt(t['measured'])} {t['unit']}", result)
+        table.add_row(t["id"], t["target"], _fmt(t["measured"]), t["unit"], result)
     return table
 
 

@@ -6,7 +6,8 @@ report.json (version "augnet-scenario-report/1"); times in seconds since the sce
 
     version, scenario {name, seed, start, duration_s, rate_hz, ionosphere, stations, check_points, trains},
     run {epochs, network_epochs, wall_s, real_time_factor}, latency_model {...}, definitions {...},
-    trains {<id>: {epochs, epochs_without_sky, status_counts, session_opened_s, vrs_moves,
+    trains {<id>: {epochs, epochs_without_sky, status_counts, session_opened_s, vrs_moves, gga_sent, vrs_masters,
+                   vrs_master_changes [{t_s, from, to}],
                    corrections_usable_s, first_fix_s, ttff_s, acquisitions [...], acquisition_time_median_s,
                    fix_rate_after_first_fix, fix_rate_after_first_fix_incl_no_sky,
                    horizontal_error_m, vertical_error_m, along_track_error_m, cross_track_error_m
@@ -227,6 +228,10 @@ def train_figures(log, tl, alert_limit_m: float) -> tuple[dict, dict]:
         "epochs": n, "epochs_without_sky": int((~sky).sum()),
         "status_counts": {s.name.lower(): int((status == s).sum()) for s in Status},
         "session_opened_s": tl.session_opened_s, "vrs_moves": tl.vrs_moves, "gga_sent": tl.gga_sent,
+        "vrs_masters": sorted({m for m in tl.vrs_master if m}),
+        "vrs_master_changes": [{"t_s": float(t[i]), "from": tl.vrs_master[i - 1], "to": tl.vrs_master[i]}
+                               for i in range(1, n) if tl.vrs_master[i] and tl.vrs_master[i - 1]
+                               and tl.vrs_master[i] != tl.vrs_master[i - 1]],
         "corrections_usable_s": float(t[usable_from]) if usable_from is not None else None,
         "first_fix_s": float(t[first_fix]) if first_fix is not None else None,
         "ttff_s": acq[0]["time_s"] if acq else None,
@@ -363,9 +368,10 @@ def targets(trains: dict, baselines: dict, network: dict, interp: dict, quiet: b
     rms = interp["dd_iono_error_m"]["rms"]
     out.append(_target("network.interpolation", "network",
                        "interpolated DD ionosphere at the trains and check points, RMS against the truth"
-                       + ("" if quiet else " (target for a quiet ionosphere: not applicable)"),
+                       + ("" if quiet else " (target for a quiet ionosphere: not applicable)")
+                       + ("" if interp["dd_iono_error_m"]["n"] else " (no train or check point: not applicable)"),
                        f"<= {TARGET_INTERP_RMS_M}", rms, "m",
-                       le(rms, TARGET_INTERP_RMS_M) if quiet else None))
+                       le(rms, TARGET_INTERP_RMS_M) if quiet and interp["dd_iono_error_m"]["n"] else None))
     return out
 
 
@@ -415,7 +421,7 @@ def write_epochs_csv(log, path: str | Path) -> None:
     series = getattr(log, "series", None)
     if series is None:
         raise ValueError("build the report first (it computes the per-epoch series)")
-    cols = ["train", "t_s", "status", "n_tracked", "base_sats", "age_s", "east_m", "north_m", "up_m",
+    cols = ["train", "t_s", "status", "n_tracked", "base_sats", "vrs_master", "age_s", "east_m", "north_m", "up_m",
             "h_error_m", "v_error_m", "along_m", "cross_m", "hpl_m", "vpl_m", "track", "truth_track",
             "confirmed", "message"]
     with open(path, "w", newline="") as f:
@@ -427,7 +433,7 @@ def write_epochs_csv(log, path: str | Path) -> None:
                 def num(x, nd=4):
                     return "" if not np.isfinite(x) else f"{x:.{nd}f}"
                 w.writerow([tid, f"{s['t'][i]:.1f}", Status(int(s["status"][i])).name.lower(), tl.n_tracked[i],
-                            tl.base_sats[i], num(s["age"][i], 2), num(s["enu"][i, 0]), num(s["enu"][i, 1]),
+                            tl.base_sats[i], tl.vrs_master[i], num(s["age"][i], 2), num(s["enu"][i, 0]), num(s["enu"][i, 1]),
                             num(s["enu"][i, 2]), num(s["h"][i]), num(s["v"][i]), num(s["along"][i]),
                             num(s["cross"][i]), num(s["hpl"][i]), num(s["vpl"][i]), tl.track[i], tl.truth_track,
                             int(tl.confirmed[i]), tl.message[i]])

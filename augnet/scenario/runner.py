@@ -103,6 +103,7 @@ class TrainLog:
     covariance: list[np.ndarray] = field(default_factory=list)
     age_s: list[float] = field(default_factory=list)  # correction age at the rover (NaN: none)
     base_sats: list[int] = field(default_factory=list)  # satellites in the VRS epoch used
+    vrs_master: list[str] = field(default_factory=list)  # the master station of the VRS epoch used
     track: list[str] = field(default_factory=list)  # matched track ('' when none)
     confirmed: list[bool] = field(default_factory=list)
     along_pl_m: list[float] = field(default_factory=list)
@@ -198,6 +199,9 @@ class Chain:
             if r.kind != "train":
                 continue
             unit = OnboardUnit(world.nav, np.zeros(3), self.track_db, ListSink(), dataclasses.replace(self.options))
+            # the base is the centre's VRS (the train connects to the VRS mountpoint): a computed station whose
+            # residual atmosphere the filter models (RtkFilter's ionosphere-weighted mode)
+            unit.rtk.base_is_vrs = True
             log = TrainLog(r.id, r.track_id)
             log.events = unit.sink.events
             self.trains[r.id] = _Train(log, i, unit, CorrectionDecoder(), collections.deque(), RepositionPolicy())
@@ -206,6 +210,7 @@ class Chain:
         self.interpolation: dict[str, list[float]] = {p: [] for p in [*self.trains, *self.check_points]}
         self.interpolation_floor: dict[str, list[float]] = {p: [] for p in self.interpolation}
         self._truth_epochs: dict[float, tuple[EpochBlock, int]] = {}
+        self._vrs_master: dict[float, dict[str, str]] = {}  # VRS epoch -> train -> its master station
         self._now = self.t0
         self.network_epochs = 0
         self.epochs = 0
@@ -253,6 +258,10 @@ class Chain:
 
     def _network_epoch(self, rep: EpochReport) -> None:
         self.network_epochs += 1
+        if rep.vrs is not None:
+            self._vrs_master[round(rep.t_gpst, 3)] = dict(zip(self.engine.sessions, rep.vrs.master))
+            while len(self._vrs_master) > 4 * TRUTH_EPOCHS_KEPT:
+                self._vrs_master.pop(next(iter(self._vrs_master)))
         got = self._truth_epochs.get(round(rep.t_gpst, 3))
         if got is None:
             return
@@ -382,6 +391,8 @@ class Chain:
         log.covariance.append(np.asarray(sol.covariance_m2, float))
         log.age_s.append(float(t - tr.base.time) if tr.base is not None else math.nan)
         log.base_sats.append(len(tr.base.sats) if tr.base is not None else 0)
+        log.vrs_master.append(self._vrs_master.get(round(tr.base.time, 3), {}).get(log.id, "")
+                              if tr.base is not None else "")
         log.track.append(m.track if (m is not None and m.track) else "")
         log.confirmed.append(bool(m is not None and m.confirmed))
         log.along_pl_m.append(m.along_pl_m if m is not None else math.inf)
