@@ -36,57 +36,88 @@ MAX_ARC_GAP_S = 10.0
 
 
 class SlipDetector:
-    """Keeps the previous epoch per satellite and flags slips in the next one."""
+    """Keeps the previous epoch per satellite and flags slips in the next one.
+
+    The previous epoch lives in arrays with one row per satellite ever seen (a dict maps the id to its
+    row), so an epoch is a handful of array operations whatever the number of satellites."""
 
     def __init__(self, max_gap_s: float = MAX_ARC_GAP_S, gf_threshold_m: float = GF_SLIP_THRESHOLD_M,
                  gf_drift_m_s: float = GF_DRIFT_M_S):
         self.max_gap_s = max_gap_s
         self.gf_threshold_m = gf_threshold_m
         self.gf_drift_m_s = gf_drift_m_s
-        self._prev: dict[str, tuple[float, np.ndarray, np.ndarray, float]] = {}
+        self.reset()
 
     def reset(self) -> None:
-        self._prev.clear()
+        self._row: dict[str, int] = {}
+        self._nf = 0
+        self._alloc(0, 0)
+
+    def _alloc(self, rows: int, nf: int) -> None:
+        self._has = np.zeros(rows, bool)  # a previous epoch is stored
+        self._t = np.full(rows, np.nan)
+        self._ph = np.full((rows, nf), np.nan)
+        self._dop = np.full((rows, nf), np.nan)
+        self._gf = np.full(rows, np.nan)
+
+    def _rows(self, sats) -> np.ndarray:
+        out = np.empty(len(sats), dtype=int)
+        for j, sat in enumerate(sats):
+            r = self._row.get(sat)
+            if r is None:
+                r = self._row[sat] = len(self._row)
+            out[j] = r
+        if len(self._row) > len(self._has):
+            old = (self._has, self._t, self._ph, self._dop, self._gf)
+            self._alloc(max(2 * len(self._has), len(self._row), 16), self._nf)
+            n = len(old[0])
+            self._has[:n], self._t[:n], self._ph[:n], self._dop[:n], self._gf[:n] = old
+        return out
 
     def detect(self, obs: EpochObs) -> np.ndarray:
         """(N, F) bool: True where the phase of that satellite and slot must not be trusted to continue."""
         n, nf = obs.phase_cyc.shape
-        slip = (obs.lli & LLI_SLIP) != 0
-        slip &= np.isfinite(obs.phase_cyc)
+        if nf != self._nf:  # a different number of slots: nothing stored is comparable
+            self._row.clear()
+            self._nf = nf
+            self._alloc(0, nf)
+        phase = obs.phase_cyc
+        has_phase = np.isfinite(phase)
+        slip = ((obs.lli & LLI_SLIP) != 0) & has_phase
         gf = _geometry_free(obs)
-        dop_disc = np.full((n, nf), np.nan)
-        prev_t = np.full(n, np.nan)
-        prev_gf = np.full(n, np.nan)
-        for i, sat in enumerate(obs.sats):
-            p = self._prev.get(str(sat))
-            if p is None:
-                continue
-            t0, ph0, d0, g0 = p
-            dt = obs.time - t0
-            if dt < 0.0 or dt > self.max_gap_s:
-                slip[i] |= np.isfinite(obs.phase_cyc[i])
-                continue
-            prev_t[i] = t0
-            prev_gf[i] = g0
-            dop = 0.5 * (obs.doppler_hz[i] + d0)
-            # RINEX sign convention: phase grows with range, Doppler is positive when approaching
-            dop_disc[i] = (obs.phase_cyc[i] - ph0) + dop * dt
-            # a phase that vanished and returned within the gap is not continuous either
-            slip[i] |= np.isfinite(obs.phase_cyc[i]) & ~np.isfinite(ph0)
-        dt_all = obs.time - prev_t
+        rows = self._rows(obs.sats.tolist())
+        seen = self._has[rows]
+        t0 = self._t[rows]
+        ph0 = self._ph[rows]
+        dt = obs.time - t0
+        gap = seen & ((dt <= 0.0) | (dt > self.max_gap_s))
+        cont = seen & ~gap
+        slip |= gap[:, None] & has_phase
+        prev_t = np.where(cont, t0, np.nan)
+        prev_gf = np.where(cont, self._gf[rows], np.nan)
+        # RINEX sign convention: phase grows with range, Doppler is positive when approaching
+        dop = 0.5 * (obs.doppler_hz + self._dop[rows])
+        dop_disc = np.where(cont[:, None], (phase - ph0) + dop * dt[:, None], np.nan)
+        # a phase that vanished and returned within the gap is not continuous either
+        slip |= cont[:, None] & has_phase & ~np.isfinite(ph0)
+        dt_all = np.nan_to_num(obs.time - prev_t, nan=0.0)
         jump = np.abs(gf - prev_gf)
-        gf_slip = jump > self.gf_threshold_m + self.gf_drift_m_s * np.nan_to_num(dt_all, nan=0.0)
-        slip |= gf_slip[:, None] & np.isfinite(obs.phase_cyc)
+        gf_slip = jump > self.gf_threshold_m + self.gf_drift_m_s * dt_all
+        slip |= gf_slip[:, None] & has_phase
+        lim = DOPPLER_SLIP_THRESHOLD_CYC + DOPPLER_DRIFT_CYC_S * dt_all
         for f in range(nf):
             col = dop_disc[:, f]
             ok = np.isfinite(col)
             if np.count_nonzero(ok) >= 2:
                 common = np.median(col[ok])
-                lim = DOPPLER_SLIP_THRESHOLD_CYC + DOPPLER_DRIFT_CYC_S * np.nan_to_num(dt_all, nan=0.0)
                 slip[:, f] |= ok & (np.abs(col - common) > lim)
-        for i, sat in enumerate(obs.sats):
-            if np.any(np.isfinite(obs.phase_cyc[i])):
-                self._prev[str(sat)] = (obs.time, obs.phase_cyc[i].copy(), obs.doppler_hz[i].copy(), gf[i])
+        upd = rows[has_phase.any(axis=1)]
+        keep = has_phase.any(axis=1)
+        self._has[upd] = True
+        self._t[upd] = obs.time
+        self._ph[upd] = phase[keep]
+        self._dop[upd] = obs.doppler_hz[keep]
+        self._gf[upd] = gf[keep]
         return slip
 
 

@@ -20,9 +20,8 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
-from augnet.gnss.constants import OMEGA_E_GPS_RAD_S, SPEED_OF_LIGHT_M_S
+from augnet.gnss.constants import OMEGA_E_GPS_RAD_S, SPEED_OF_LIGHT_M_S, WGS84_A_M, WGS84_E2
 from augnet.gnss.ephemeris import NavigationData, group_delay_s, satellite_state
-from augnet.gnss.geometry import azimuth_elevation, ecef_to_geodetic
 from augnet.gnss.signals import FREQ_L1_HZ
 from augnet.onboard.atmosphere import klobuchar_l1_m, saastamoinen_m
 from augnet.onboard.observations import BAND_FREQ_HZ, EpochObs
@@ -132,6 +131,61 @@ def _select_cached(nav: NavigationData, sats: Sequence[str], t: float) -> np.nda
     return idx
 
 
+def first_code(obs: EpochObs) -> np.ndarray:
+    """The first available pseudorange per satellite, slot 0 first (what SPP uses, and RTK for the
+    transmission time, where a metre of difference between signals moves the satellite by 13 um)."""
+    out = obs.code_m[:, 0].copy()
+    for f in range(1, obs.code_m.shape[1]):
+        out = np.where(np.isnan(out), obs.code_m[:, f], out)
+    return out
+
+
+def receiver_frame(rx_m) -> tuple[np.ndarray, np.ndarray]:
+    """(geodetic lat, lon, h; ENU rotation, rows E, N, U) of one receiver position, kept for the
+    positions seen last (the base's never changes; the rover's serves several computations per epoch).
+
+    The same relation as `augnet.gnss.geometry.ecef_to_geodetic` (its two fixed-point refinement
+    steps), started from Bowring's closed form instead of PROJ and done in scalar arithmetic: equal to
+    an ulp in the angles and a nanometre in height, and ten times faster for one point."""
+    p = np.asarray(rx_m, dtype=float)
+    key = p.tobytes()
+    hit = _frame_cache.get(key)
+    if hit is None:
+        x, y, z = float(p[0]), float(p[1]), float(p[2])
+        a, e2 = WGS84_A_M, WGS84_E2
+        rho = math.hypot(x, y)
+        b = a * math.sqrt(1.0 - e2)
+        th = math.atan2(z * a, rho * b)
+        lat = math.atan2(z + e2 / (1.0 - e2) * b * math.sin(th) ** 3, rho - e2 * a * math.cos(th) ** 3)
+        for _ in range(2):
+            sl, cl = math.sin(lat), math.cos(lat)
+            n = a / math.sqrt(1.0 - e2 * sl * sl)
+            h = rho * cl + z * sl - a * math.sqrt(1.0 - e2 * sl * sl)
+            lat = math.atan2(z, rho * (1.0 - e2 * n / (n + h)))
+        lon = math.atan2(y, x)
+        sl, cl = math.sin(lat), math.cos(lat)
+        so, co = math.sin(lon), math.cos(lon)
+        h = rho * cl + z * sl - a * math.sqrt(1.0 - e2 * sl * sl)
+        rot = np.array([[-so, co, 0.0], [-sl * co, -sl * so, cl], [cl * co, cl * so, sl]])
+        hit = (np.array([lat, lon, h]), rot)
+        if len(_frame_cache) >= _FRAME_CACHE_SIZE:
+            _frame_cache.pop(next(iter(_frame_cache)))
+        _frame_cache[key] = hit
+    return hit
+
+
+_FRAME_CACHE_SIZE = 8
+_frame_cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def azimuth_elevation_from(rx_m, rot: np.ndarray, sat_m) -> tuple[np.ndarray, np.ndarray]:
+    """`augnet.gnss.geometry.azimuth_elevation` with the receiver's ENU rotation already known."""
+    d = np.asarray(sat_m, dtype=float) - np.asarray(rx_m, dtype=float)
+    enu = np.einsum("...ij,...j->...i", rot, d)
+    e, n, u = enu[..., 0], enu[..., 1], enu[..., 2]
+    return np.mod(np.arctan2(e, n), 2.0 * np.pi), np.arctan2(u, np.hypot(e, n))
+
+
 def geometric_range(sat_pos_m, rx_m):
     """(range [m] incl. Sagnac, unit line-of-sight receiver->satellite (N, 3))."""
     d = sat_pos_m - rx_m
@@ -176,17 +230,21 @@ def _fail(t, n, msg) -> SppResult:
 
 
 def solve_spp(obs: EpochObs, nav: NavigationData, options: SppOptions | None = None,
-              initial_m=None) -> SppResult:
-    """Position and per-system clocks from slot-0 pseudoranges of one epoch.  Never raises on data."""
+              initial_m=None, sat_positions: SatPositions | None = None) -> SppResult:
+    """Position and per-system clocks from slot-0 pseudoranges of one epoch.  Never raises on data.
+
+    `sat_positions`: the epoch's satellite states if the caller has them already, computed by
+    `satellite_positions(nav, obs.sats, obs.time, first_code(obs))` (what this function would do).
+    """
     opt = options or SppOptions()
     n = len(obs.sats)
     try:
-        return _solve(obs, nav, opt, initial_m)
+        return _solve(obs, nav, opt, initial_m, sat_positions)
     except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:  # defensive: bad numbers
         return _fail(obs.time, n, f"SPP failed: {exc}")
 
 
-def _solve(obs: EpochObs, nav: NavigationData, opt: SppOptions, initial_m) -> SppResult:
+def _solve(obs: EpochObs, nav: NavigationData, opt: SppOptions, initial_m, sp_given=None) -> SppResult:
     n = len(obs.sats)
     if n == 0:
         return _fail(obs.time, n, "no observations")
@@ -201,7 +259,8 @@ def _solve(obs: EpochObs, nav: NavigationData, opt: SppOptions, initial_m) -> Sp
     pr = obs.code_m[rows_n, slot].copy()
     signal = obs.signal[rows_n, slot]
     usable = np.isfinite(pr) & np.isin(sys_, list(opt.systems)) & (pr > 1.0e7) & (pr < 6.0e7)
-    sp = satellite_positions(nav, obs.sats, obs.time, np.where(usable, pr, np.nan))
+    # (satellites not usable are masked below whatever their computed state)
+    sp = sp_given if sp_given is not None else satellite_positions(nav, obs.sats, obs.time, np.where(usable, pr, np.nan))
     usable &= sp.valid
     # group delay of the slot-0 signal (TGD, BGD); unknown signals get none
     tgd = np.zeros(n)
@@ -265,8 +324,8 @@ def _iterate(obs, sp, pr, tgd, iono_scale, usable, sys_, x0, opt, alpha, beta) -
         var = np.full(n, np.inf)
         corr = np.zeros(n)
         if near:
-            llh = ecef_to_geodetic(x)
-            az, el = azimuth_elevation(x, np.where(usable[:, None], sp.position_m, x + 1.0))
+            llh, rot = receiver_frame(x)
+            az, el = azimuth_elevation_from(x, rot, np.where(usable[:, None], sp.position_m, x + 1.0))
             use &= el >= opt.elevation_mask_rad
             sin_el = np.maximum(np.sin(el), 0.05)
             var = CODE_SIGMA_A_M**2 + CODE_SIGMA_B_M**2 / sin_el**2
@@ -316,7 +375,7 @@ def _iterate(obs, sp, pr, tgd, iono_scale, usable, sys_, x0, opt, alpha, beta) -
     v = pr[idx] - pred
     resid = np.full(n, np.nan)
     resid[idx] = v
-    llh = ecef_to_geodetic(x)
+    llh, _ = receiver_frame(x)
     if not (MIN_PLAUSIBLE_HEIGHT_M < llh[2] < MAX_PLAUSIBLE_HEIGHT_M):
         return SppResult(False, obs.time, np.full(3, np.nan), used=use, residuals_m=resid,
                          message=f"implausible height {llh[2]:.0f} m")
@@ -333,7 +392,8 @@ DOPPLER_MAX_RESIDUAL_M_S = 5.0
 DOPPLER_SIGMA_M_S = 0.05  # range-rate noise of a geodetic / good automotive receiver, per satellite
 
 
-def doppler_velocity(obs: EpochObs, nav: NavigationData, position_m, mask_rad: float = math.radians(10.0)):
+def doppler_velocity(obs: EpochObs, nav: NavigationData, position_m, mask_rad: float = math.radians(10.0),
+                     sat_positions: SatPositions | None = None):
     """(velocity ECEF [m/s] (3,), its covariance (3, 3)) from slot-0 Dopplers by least squares with a
     receiver clock drift; NaNs when fewer than five Dopplers are usable.  Range rate = -lambda * D."""
     nan = (np.full(3, np.nan), np.full((3, 3), np.nan))
@@ -343,12 +403,17 @@ def doppler_velocity(obs: EpochObs, nav: NavigationData, position_m, mask_rad: f
     o = obs.sanitised()
     dop = o.doppler_hz[:, 0]
     lam = o.wavelength_m[:, 0]
-    sp = satellite_positions(nav, o.sats, o.time, o.code_m[:, 0])
-    ok = sp.valid & np.isfinite(dop) & np.isfinite(lam)
+    if sat_positions is None:
+        sp = satellite_positions(nav, o.sats, o.time, o.code_m[:, 0])
+        ok = sp.valid & np.isfinite(dop) & np.isfinite(lam)
+    else:  # computed from `first_code`: the same states wherever slot 0 has a code
+        sp = sat_positions
+        ok = sp.valid & np.isfinite(o.code_m[:, 0]) & np.isfinite(dop) & np.isfinite(lam)
     if np.count_nonzero(ok) < 5:
         return nan
     _, los = geometric_range(np.where(ok[:, None], sp.position_m, p + 1.0), p)
-    _, el = azimuth_elevation(p, np.where(ok[:, None], sp.position_m, p + np.array([0.0, 0.0, 1.0])))
+    _, rot = receiver_frame(p)
+    _, el = azimuth_elevation_from(p, rot, np.where(ok[:, None], sp.position_m, p + np.array([0.0, 0.0, 1.0])))
     ok &= el >= mask_rad
     if np.count_nonzero(ok) < 5:
         return nan
