@@ -493,8 +493,9 @@ class System:
         if self.caster is not None:
             await self.caster.stop()
         if self.bus is not None:
+            bus, self.bus = self.bus, None  # nothing more is published from here on
             with contextlib.suppress(Exception):
-                await self.bus.close()
+                await bus.close()
         await asyncio.gather(*self._tasks, return_exceptions=True)
         if self.writer is not None:
             self.writer.close()

@@ -1,0 +1,53 @@
+"""The parts of `augnet up` that are pure functions: settings, the run's scenario, RSSP-I line sections."""
+
+from __future__ import annotations
+
+import pytest
+
+from augnet.system.rbc_link import SECTION_LENGTH_KM, SectionPlan, fixed_stations
+from augnet.system.runtime import scenario_for_run
+from augnet.system.settings import MAX_LIVE_TRAINS, SettingsError, SystemSettings
+from rssp1.messages import SectionStatus
+from stations.track import TrackLine
+
+
+@pytest.mark.parametrize("kwargs, field", [
+    ({"trains": MAX_LIVE_TRAINS + 1}, "trains"), ({"trains": -1}, "trains"),
+    ({"duration_s": 0.0}, "duration"), ({"caster_port": 70000}, "caster-port"),
+    ({"caster_port": 9000, "console_port": 9000}, "console-port"), ({"db_url": "augnet.db"}, "db"),
+    ({"bus_url": "redis://x"}, "bus"),
+])
+def test_an_invalid_setting_is_named(kwargs, field):
+    with pytest.raises(SettingsError) as err:
+        SystemSettings(**kwargs).validate()
+    assert err.value.field == field
+    assert str(err.value).startswith(field)
+
+
+def test_the_run_starts_a_moment_from_now_with_the_requested_trains():
+    now = 1_479_350_000.0
+    sc = scenario_for_run(SystemSettings(trains=6, duration_s=60), now_gpst=now)
+    from augnet.gnss import time as gtime
+    t0 = gtime.from_datetime(sc.start)
+    assert now < t0 <= now + 5 and t0 == int(t0)
+    assert sc.duration_s >= 60
+    ids = [t.id for t in sc.trains]
+    assert ids[:2] == ["G101", "G303"] and len(set(ids)) == 6
+    length_km = TrackLine(sc.line).length_m / 1000.0
+    assert all(0 <= t.start_km <= length_km for t in sc.trains)
+    assert [t.id for t in scenario_for_run(SystemSettings(trains=1), now_gpst=now).trains] == ["G101"]
+    assert scenario_for_run(SystemSettings(trains=0), now_gpst=now).trains == []
+
+
+def test_line_sections_follow_the_stations_that_bracket_them():
+    plan = SectionPlan(45.0, {"A": 2.0, "B": 22.0, "C": 44.0})
+    assert plan.ids == [1, 2, 3, 4, 5] and SECTION_LENGTH_KM == 10.0
+    assert plan.bracket[1] == ("A", "B") and plan.bracket[3] == ("B", "C")
+    all_up = plan.statuses({"A", "B", "C"}, {"A", "B", "C"})
+    assert set(all_up.values()) == {SectionStatus.OK}
+    b_down = plan.statuses({"A", "C"}, {"A", "C"})
+    assert b_down[1] == b_down[3] == SectionStatus.DEGRADED  # interpolation over a longer distance
+    float_net = plan.statuses({"A", "B", "C"}, set())
+    assert set(float_net.values()) == {SectionStatus.DEGRADED}
+    assert set(plan.statuses(set(), set()).values()) == {SectionStatus.DO_NOT_USE}
+    assert fixed_stations({"A-B": 0.9, "B-C": 0.2}) == {"A", "B"}
