@@ -90,7 +90,7 @@ class SlipDetector:
         t0 = self._t[rows]
         ph0 = self._ph[rows]
         dt = obs.time - t0
-        gap = seen & ((dt <= 0.0) | (dt > self.max_gap_s))
+        gap = seen & ((dt < 0.0) | (dt > self.max_gap_s))
         cont = seen & ~gap
         slip |= gap[:, None] & has_phase
         prev_t = np.where(cont, t0, np.nan)
