@@ -52,8 +52,7 @@ def error_over_time(series: dict, path: Path, scenario_name: str) -> None:
             m = (s["status"] == st) & np.isfinite(s["h"])
             if m.any():
                 ax.scatter(t[m], np.maximum(s["h"][m], PLOT_FLOOR_M), s=6, color=colour, label=f"H error ({st.name.lower()})")
-        m = np.isfinite(s["v"])
-        ax.plot(t[m], np.maximum(s["v"][m], PLOT_FLOOR_M), lw=0.6, color="tab:blue", alpha=0.6, label="V error")
+        ax.plot(t, np.maximum(s["v"], PLOT_FLOOR_M), lw=0.6, color="tab:blue", alpha=0.6, label="V error")  # gaps stay gaps
         ax.plot(t, np.where(np.isfinite(s["hpl"]), s["hpl"], np.nan), lw=0.9, color="k", ls="--", label="HPL")
         ax.plot(t, np.where(np.isfinite(s["vpl"]), s["vpl"], np.nan), lw=0.7, color="tab:purple", ls=":", label="VPL")
         ax.axhline(0.02, color="tab:green", lw=0.6, ls="-.", label="2 cm")

@@ -65,7 +65,7 @@ def load(scenario: str | Path | Scenario, duration_s: float | None = None) -> Sc
     if duration_s is not None:
         if not duration_s > 0:
             raise ScenarioError(f"scenario {sc.name}: duration must be positive, got {duration_s}")
-        sc = sc.model_copy(update={"duration_s": min(float(duration_s), sc.duration_s)})
+        sc = sc.model_copy(update={"duration_s": float(duration_s)})
     return sc
 
 
