@@ -177,3 +177,115 @@ def test_many_rovers_and_satellites_in_one_product():
     rovers = np.column_stack([rng.uniform(0, 210e3, 2000), rng.uniform(-2e3, 5e3, 2000)])
     corr, codes = interpolate(sta, rovers, V)
     assert corr.shape == (2000, 40) and np.isfinite(corr).all()
+
+
+# --- the figure on the simulated network, against the simulator's truth --------------------------------
+#
+# Issue 5: "interpolated DD ionosphere at a point ~35 km from the nearest station: RMS <= 1 cm quiet (report the
+# storm figure); leave-one-station-out prediction error reported". network-70km: check1 sits 35 km from each of
+# four stations (opposite ones 70 km apart). The network engine solves the four stations (NetworkSolver, the
+# simulator's observables, never its truth); its DD ionosphere residuals are interpolated to check1 exactly as
+# the VRS does (interpolate() on the network's station coordinates, residuals and master); the result is
+# compared with the simulator's true DD ionosphere between check1 and the master. DDs are re-referenced to the
+# highest corrected satellite at check1 per system, as a rover forms them.
+
+NETWORK_RATE_HZ = 0.5
+NETWORK_DURATION_S = {"quiet": 1200.0, "moderate": 600.0, "storm": 600.0}
+TARGET_QUIET_RMS_M = 0.01
+
+
+def _network_figures(level: str) -> dict:
+    from augnet.centre.network import NetworkSolver
+    from augnet.gnss.geometry import ecef_to_enu
+    from stations.ionosphere import delay_m
+    from stations.scenario import load_scenario
+    from stations.world import World
+    from tests.centre.simdata import station_epochs
+
+    sc = load_scenario("network-70km").model_copy(update={"duration_s": NETWORK_DURATION_S[level],
+                                                          "rate_hz": NETWORK_RATE_HZ})
+    iono = sc.errors.ionosphere.model_copy(update={"level": level})
+    sc = sc.model_copy(update={"errors": sc.errors.model_copy(update={"ionosphere": iono})})
+    world = World(sc)
+    ids = world.receiver_ids
+    rover = ids.index("check1")
+    col = {s: j for j, s in enumerate(world.sats)}
+    stations = {r.id: r.ecef[0] for r in world.receivers if r.id != "check1"}
+    net = NetworkSolver(stations)
+    est, floor, loo_est, loo_true = [], [], [], []
+    for block in world.epochs():
+        per = {r: station_epochs(world, block, i) for i, r in enumerate(ids) if r in stations}
+        i1 = delay_m(block.stec_tecu, world.freq_hz[None, None, :, 0])  # truth, each system's first signal
+        for e in range(len(block.t_gpst)):
+            ne = net.update({r: per[r][e] for r in stations}, world.nav)
+            if not len(ne.sats):
+                continue
+            rows = [ids.index(s) for s in ne.stations]
+            m = rows[0]
+            cols = np.array([col[s] for s in ne.sats])
+            refs = np.array([col.get(ne.refs.get(s[0], ""), -1) for s in ne.sats])
+            ok_ref = refs >= 0
+            sd = i1[e][:, cols] - i1[e][:, np.maximum(refs, 0)]  # (receivers, sats): sat minus network ref
+            truth = np.where(ok_ref, sd - sd[m], np.nan)  # DD against the master
+            V = ne.dd_iono_m
+            supported = np.isfinite(V[1:]).any(axis=0) & ok_ref  # some baseline fixed it
+            V_true = np.where(np.isfinite(V), truth[rows], np.nan)
+            rov_en = ecef_to_enu(world.receivers[rover].ecef[0] - ne.station_xyz_m[0], ne.station_xyz_m[0])[None, :2]
+            c_est, _ = interpolate(ne.station_en_m, rov_en, V)
+            c_true, _ = interpolate(ne.station_en_m, rov_en, V_true)
+            err_est = c_est[0] - truth[rover]
+            err_true = c_true[0] - truth[rover]
+            el = block.elevation_rad[e, rover, cols]
+            use = supported & np.isfinite(err_est)
+            for system in {s[0] for s in ne.sats}:
+                k = np.flatnonzero(use & np.array([s[0] == system for s in ne.sats]))
+                if len(k) < 2:
+                    continue
+                r = k[np.argmax(el[k])]
+                est.extend(err_est[k[k != r]] - err_est[r])
+                floor.extend(err_true[k[k != r]] - err_true[r])
+            # leave one station out: each non-master station predicted from the others, against its own
+            # residual (what the network can see) and against the truth
+            lo = leave_one_out(ne.station_en_m, V)
+            fin = np.isfinite(lo)
+            loo_est.extend(lo[fin])
+            loo_true.extend((lo + V - truth[rows])[fin])
+    rms = lambda x: float(np.sqrt(np.mean(np.square(x))))  # noqa: E731
+    return {"level": level, "n": len(est), "rms_m": rms(est), "p95_m": float(np.percentile(np.abs(est), 95)),
+            "floor_rms_m": rms(floor), "loo_rms_m": rms(loo_est), "loo_true_rms_m": rms(loo_true)}
+
+
+@pytest.fixture(scope="module")
+def network_figures():
+    out = {level: _network_figures(level) for level in NETWORK_DURATION_S}
+    for f in out.values():
+        print(f"\nnetwork-70km {f['level']}: interpolated DD ionosphere at check1 (35 km from every station) "
+              f"{f['rms_m'] * 100:.2f} cm RMS, 95 % {f['p95_m'] * 100:.2f} cm (n={f['n']}); from the true station "
+              f"residuals {f['floor_rms_m'] * 100:.2f} cm; leave-one-station-out {f['loo_rms_m'] * 100:.2f} cm "
+              f"against the station's residual, {f['loo_true_rms_m'] * 100:.2f} cm against the truth")
+    return out
+
+
+@pytest.mark.slow
+def test_interpolated_dd_ionosphere_at_35_km_quiet(network_figures):
+    """Measured when written (20 min at 0.5 Hz): 0.95 cm RMS (95 % 1.8 cm); 0.64 cm from the true station
+    residuals (what the non-linear field leaves); the rest is the station residuals' own error (~0.8 cm per
+    station and DD: the phase multipath the 30 s smoothing on each baseline leaves, and that smoothing's
+    30 s lag behind a DD ionosphere moving ~0.1 mm/s). The margin to the 1 cm target is thin."""
+    f = network_figures["quiet"]
+    assert f["n"] > 3000
+    assert f["rms_m"] <= TARGET_QUIET_RMS_M
+    assert f["floor_rms_m"] < f["rms_m"]
+
+
+@pytest.mark.slow
+def test_moderate_and_storm_and_leave_one_out_are_reported(network_figures):
+    """Loose bounds only: the figures are printed. Measured when written (10 min each): moderate 1.6 cm
+    (floor 1.5), storm 32 cm (floor 30). Leave-one-out (DDs against the network's reference satellites; a
+    corner of the square predicted from the other three, i.e. extrapolated 50-70 km): 3.1 cm quiet, 6.0 cm
+    moderate, 17 cm storm, the same against the truth."""
+    q, mod, storm = network_figures["quiet"], network_figures["moderate"], network_figures["storm"]
+    assert mod["n"] > 1000 and storm["n"] > 1000
+    assert q["rms_m"] < mod["rms_m"] < 0.03
+    assert 0.05 < storm["rms_m"] < 0.6
+    assert q["loo_rms_m"] < 0.05 and q["loo_rms_m"] > q["rms_m"]
