@@ -144,13 +144,19 @@ def test_orbit_and_clock_errors_have_stated_size():
     assert np.max(np.abs(_cat(bl0, "sat_clock_error_s")[obs0])) < 0.3e-9
 
 
-@pytest.mark.parametrize("name,a,b,lo,hi", [("network-70km", "NORTH", "SOUTH", 1.0, 4.0),
-                                             ("iono-storm", "ST1", "ST2", 10.0, 20.0)])
-def test_dd_ionosphere_level(name, a, b, lo, hi):
+@pytest.mark.parametrize("name,level,a,b,lo,hi", [("network-70km", None, "NORTH", "SOUTH", 1.0, 4.0),
+                                                   ("network-70km", "moderate", "NORTH", "SOUTH", 1.0, 4.0),
+                                                   ("iono-storm", None, "ST1", "ST2", 10.0, 20.0)])
+def test_dd_ionosphere_level(name, level, a, b, lo, hi):
+    """DD L1 ionosphere over 70 km, RMS in ppm of the baseline: 1-4 quiet (and moderate), 10-20 in a storm
+    (network-rtk.md). Measured over 180 s: quiet 1.24 (95 % 2.34), moderate 2.18 (95 % 3.89), storm 13.9."""
     sc = load_scenario(name).model_copy(update=dict(duration_s=180.0, trains=[]))
+    if level is not None:
+        iono = sc.errors.ionosphere.model_copy(update={"level": level})
+        sc = sc.model_copy(update={"errors": sc.errors.model_copy(update={"ionosphere": iono})})
     w = World(sc)
     stats = dd_ionosphere_ppm(w, w.run(), a, b)
-    print(f"{name} {a}-{b}: DD L1 ionosphere {stats}")
+    print(f"{name} ({level or 'as written'}) {a}-{b}: DD L1 ionosphere {stats}")
     assert lo <= stats["rms"] <= hi
 
 
