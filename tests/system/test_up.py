@@ -138,6 +138,11 @@ misc-timeinterp    =on
 """
 
 
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
+    "not met yet (measured 2026-11-22 on demo): rtkrcv decodes both streams, uploads its GGA and holds an "
+    "RTK float on our VRS with 10-12 satellites (ratio 1.1-2.0, sd 6-11 cm) but does not fix within the "
+    "run; our onboard core fixes on the same VRS in 70-100 s. Same cause as the rnx2rtkp xfail in "
+    "tests/centre/test_vrs_rtklib.py: DD ionosphere interpolation error in the VRS (~3 cm at 35 km)"))
 def test_rtkrcv_rides_as_a_train_and_fixes_on_our_vrs(up_run):
     rtkrcv, str2str = require_tool("rtkrcv"), require_tool("str2str")
     work, state = up_run["work"], up_run["state"]
