@@ -12,8 +12,8 @@ DEB_CHECK := command -v rnx2rtkp >/dev/null && command -v convbin >/dev/null && 
 
 .PHONY: run test bench debs venv clean
 
-run: venv
-	$(VENV)/bin/augnet run
+run: venv debs
+	$(VENV)/bin/augnet up demo
 
 test: venv debs
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(PY) -m pytest -q

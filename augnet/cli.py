@@ -56,14 +56,12 @@ def _mount() -> None:
 
 @app.command()
 def run() -> None:
-    """The main job on its embedded defaults (what `make run` starts).
+    """The main job on its embedded defaults (what `make run` starts): `augnet up demo`."""
+    from augnet.system.cli import up
 
-    Until the whole system (`augnet up`) lands, this runs the real pieces that exist: the RTCM codec
-    benchmark against pyrtcm.
-    """
-    from augnet.bench import cli as bench_cli
-
-    bench_cli.run_all()
+    up(scenario="demo", trains=None, duration=None, db="sqlite:///augnet.db", host="127.0.0.1",
+       caster_port=2101, console_port=8000, bus="", rbc=True, view=True, report=None,
+       state=__import__("pathlib").Path("augnet-up.json"), admin_password="")
 
 
 def main() -> None:
