@@ -12,7 +12,7 @@ report.json (version "augnet-scenario-report/1"); times in seconds since the sce
                    fix_rate_after_first_fix, fix_rate_after_first_fix_incl_no_sky,
                    horizontal_error_m, vertical_error_m, along_track_error_m, cross_track_error_m
                        (fixed epochs: n, p50, p95, p99, rms, max of absolute values),
-                   horizontal_error_all_m (every epoch with a position), wrong_fixes,
+                   horizontal_error_all_m, vertical_error_all_m (every epoch with a position), wrong_fixes,
                    track_id {epochs_with_position, right, wrong, off_map, confirmed, confirmed_wrong},
                    virtual_balises {expected, captured, missed, missed_in_gnss_outage, missed_with_gnss, false,
                                     capture_error_m, events [...], missed_ids, false_ids},
