@@ -28,6 +28,7 @@ from fastapi.responses import JSONResponse
 from fastapi.staticfiles import StaticFiles
 from sqlalchemy.orm import Session, sessionmaker
 
+from augnet.console.deps import TokenCache
 from augnet.console.live import LiveState, json_safe
 from augnet.console.metrics import MetricsMiddleware, RequestMetrics
 from augnet.console.routers import alarms, auth, caster, history, network, operators, page, stations, trains
@@ -47,6 +48,7 @@ def create_app(sessions: sessionmaker[Session], live: LiveState | None = None) -
     app.state.sessions = sessions
     app.state.live = live if live is not None else LiveState()
     app.state.request_metrics = RequestMetrics()
+    app.state.token_cache = TokenCache()
 
     for module in (auth, operators, stations, network, trains, alarms, caster, history, live_feed):
         app.include_router(module.router, prefix=API_PREFIX)

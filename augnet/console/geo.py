@@ -4,16 +4,21 @@ point lies along the line's centre line (for the line diagram)."""
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numpy as np
 
 from augnet.gnss.constants import WGS84_A_M
 from augnet.gnss.geometry import ecef_to_geodetic, geodetic_deg_to_ecef
 
+# Distinct station positions / (line, point) pairs remembered: conversions are pure, and /api/stations asks for
+# the same few dozen on every poll.
+CACHE_ENTRIES = 4096
 # A point further than this from the centre line is not drawn on it (a station of a neighbouring line).
 MAX_CROSS_TRACK_KM = 50.0
 
 
+@lru_cache(maxsize=CACHE_ENTRIES)
 def to_geodetic_deg(x_m: float, y_m: float, z_m: float) -> tuple[float, float, float]:
     lat, lon, h = ecef_to_geodetic(np.array([x_m, y_m, z_m]))
     return math.degrees(lat), math.degrees(lon), float(h)
@@ -34,7 +39,13 @@ def along_track_km(polyline: list[list[float]], lat_deg: float, lon_deg: float,
     from the track map) share one scale. None when the polyline is empty or the point is off the line."""
     if not polyline or len(polyline) < 2:
         return None
-    pts = np.asarray(polyline, dtype=float)[:, :2]
+    return _along_track_km(tuple(tuple(p[:2]) for p in polyline), lat_deg, lon_deg, length_km)
+
+
+@lru_cache(maxsize=CACHE_ENTRIES)
+def _along_track_km(polyline: tuple[tuple[float, float], ...], lat_deg: float, lon_deg: float,
+                    length_km: float | None) -> float | None:
+    pts = np.asarray(polyline, dtype=float)
     lat0 = math.radians(float(pts[:, 0].mean()))
     km_per_rad = WGS84_A_M / 1000.0
     xy = np.column_stack([np.radians(pts[:, 1]) * math.cos(lat0), np.radians(pts[:, 0])]) * km_per_rad

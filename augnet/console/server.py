@@ -19,7 +19,7 @@ class ConsoleThread:
         self.host = host
         self.port = port
         self.server = uvicorn.Server(uvicorn.Config(app, host=host, port=port, log_level=log_level,
-                                                    ws="websockets", lifespan="off"))
+                                                    ws="auto", lifespan="off"))
         self._thread = threading.Thread(target=self.server.run, name="augnet-console", daemon=True)
 
     @property

@@ -181,3 +181,17 @@ def test_nul_characters_are_422_on_every_backend(console):
     assert "name" in error_fields(r)
     assert "code" in error_fields(c.client.get("/api/stations/A%00B", headers=c.as_("vera")))
     assert "subject" in error_fields(c.client.get("/api/quality", params={"subject": "S\x00"}, headers=c.as_("vera")))
+
+
+def test_token_cache_trusts_a_token_at_most_its_ttl(console):
+    """A change made by another process (here: straight in the store) reaches the console within the TTL."""
+    c = console
+    cache = c.client.app.state.token_cache
+    now = [1000.0]
+    cache.clock = lambda: now[0]
+    assert c.client.get("/api/alarms", headers=c.as_("vera")).status_code == 200  # verified, remembered
+    with c.sessions.begin() as s:
+        q.get_operator(s, "vera").enabled = False
+    assert c.client.get("/api/alarms", headers=c.as_("vera")).status_code == 200  # still trusted
+    now[0] += cache.ttl_s + 0.001
+    assert c.client.get("/api/alarms", headers=c.as_("vera")).status_code == 401

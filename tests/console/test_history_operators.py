@@ -67,6 +67,7 @@ def test_operator_accounts(console):
     login = c.client.post("/api/auth/login", json={"name": "ivy", "password": "ivy-password"})
     assert login.status_code == 200
     ivy = {"Authorization": f"Bearer {login.json()['token']}"}
+    assert c.client.post("/api/stations/X/disable", headers=ivy).status_code == 404  # operator: allowed, no such
     # demote ivy: her token now has viewer rights
     r = c.client.patch("/api/operators/ivy", json={"role": "viewer"}, headers=c.as_("ada"))
     assert r.json()["role"] == "viewer"

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter, Depends, Response, status
 from typing import Annotated
+
+from fastapi import APIRouter, Depends, Request, Response, status
 
 from augnet.console.deps import DB, Principal, current_principal, unauthorized, utc
 from augnet.console.schemas import LoginIn, OperatorOut, TokenOut
@@ -29,13 +30,14 @@ def login(body: LoginIn, session: DB) -> TokenOut:
 
 
 @router.post("/logout", status_code=status.HTTP_204_NO_CONTENT)
-def logout(who: Caller, session: DB) -> Response:
+def logout(who: Caller, session: DB, request: Request) -> Response:
     """Revoke the token this request carries."""
     q.revoke_token(session, who.name, who.token)
     session.commit()
+    request.app.state.token_cache.clear()
     return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
 @router.get("/me", response_model=OperatorOut)
-def me(who: Caller) -> OperatorOut:
+async def me(who: Caller) -> OperatorOut:
     return OperatorOut(name=who.name, role=who.role, enabled=True)

@@ -41,7 +41,7 @@ def _tell_system(live: LiveState, kind: str, name: str, change: dict) -> None:
 
 
 @router.get("", response_model=CasterOut)
-def caster(who: Viewer, live: Live) -> CasterOut:
+async def caster(who: Viewer, live: Live) -> CasterOut:
     snap = _snapshot(live)
     if snap is None:
         return CasterOut(running=False)
@@ -93,7 +93,7 @@ def edit_mountpoint(name: Key, body: MountpointPatch, who: Admin, session: DB, l
 
 
 @router.get("/clients", response_model=list[dict])
-def clients(who: Viewer, live: Live) -> list[dict]:
+async def clients(who: Viewer, live: Live) -> list[dict]:
     """Connected NTRIP clients as the caster reports them (id, ip, user, mount, version, bytes out, last GGA
     position, serving base); empty when no caster runs in this process."""
     snap = _snapshot(live)

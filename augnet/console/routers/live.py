@@ -7,6 +7,7 @@ import asyncio
 import logging
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
+from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 
 from augnet.console.deps import Live, Viewer, principal_for_token
@@ -19,10 +20,10 @@ WS_UNAUTHORIZED = 4401
 MAX_EVENTS_PER_MESSAGE = 500  # a burst is sent as one message of up to this many events
 
 
-@router.get("/live/snapshot")
-def snapshot(who: Viewer, live: Live) -> dict:
+@router.get("/live/snapshot", response_class=JSONResponse)
+async def snapshot(who: Viewer, live: Live) -> JSONResponse:
     """Stations, baselines, trains, network summary and line, as the websocket's first message."""
-    return live.snapshot()
+    return JSONResponse(live.snapshot())  # already JSON-safe: no model validation on this hot path
 
 
 def _check_token(app, token: str | None):

@@ -13,7 +13,7 @@ router = APIRouter(tags=["network"])
 
 
 @router.get("/network", response_model=NetworkOut)
-def network(who: Viewer, live: Live) -> NetworkOut:
+async def network(who: Viewer, live: Live) -> NetworkOut:
     stations = live.station_list()
     baselines = [BaselineOut(**as_dict(b)) for b in live.baseline_list()]
     by_state = {s: 0 for s in BASELINE_STATES}
@@ -26,11 +26,11 @@ def network(who: Viewer, live: Live) -> NetworkOut:
 
 
 @router.get("/network/baselines", response_model=list[BaselineOut])
-def baselines(who: Viewer, live: Live) -> list[BaselineOut]:
+async def baselines(who: Viewer, live: Live) -> list[BaselineOut]:
     return [BaselineOut(**as_dict(b)) for b in live.baseline_list()]
 
 
 @router.get("/line", response_model=LineOut)
-def line(who: Viewer, live: Live) -> LineOut:
+async def line(who: Viewer, live: Live) -> LineOut:
     """The track centre line for the diagram: id, length [km], polyline [[lat, lon], ...]."""
     return LineOut(**{k: v for k, v in live.line_summary().items() if k in LineOut.model_fields})

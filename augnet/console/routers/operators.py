@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter, HTTPException, status
+from fastapi import APIRouter, HTTPException, Request, status
 from sqlalchemy import func, select
 
 from augnet.console.deps import Admin, DB, Key, field_error
@@ -33,7 +33,7 @@ def add_operator(body: OperatorIn, who: Admin, session: DB) -> OperatorOut:
 
 @router.patch("/{name}", response_model=OperatorOut,
               responses={404: {"description": "no such operator"}, 409: {"description": "last admin"}})
-def edit_operator(name: Key, body: OperatorPatch, who: Admin, session: DB) -> OperatorOut:
+def edit_operator(name: Key, body: OperatorPatch, who: Admin, session: DB, request: Request) -> OperatorOut:
     """Change role, enabled flag or password. Disabling or a new password revokes the operator's tokens.
     The last enabled admin can be neither demoted nor disabled (nobody could manage accounts after)."""
     if body.role is None and body.enabled is None and body.password is None:
@@ -49,4 +49,5 @@ def edit_operator(name: Key, body: OperatorPatch, who: Admin, session: DB) -> Op
     op = q.update_operator(session, who.name, name, role=body.role, enabled=body.enabled,
                            password_hash=None if body.password is None else hash_password(body.password))
     session.commit()
+    request.app.state.token_cache.clear()  # a new role or a revoked token counts from the next request
     return _out(op)

@@ -20,7 +20,7 @@ def index() -> FileResponse:
 
 
 @router.get("/healthz", tags=["meta"])
-def healthz() -> dict:
+async def healthz() -> dict:
     return {"status": "ok"}
 
 

@@ -25,7 +25,7 @@ def train_out(t: TrainLive, now: float) -> TrainOut:
 
 
 @router.get("", response_model=list[TrainOut])
-def list_trains(who: Viewer, live: Live) -> list[TrainOut]:
+async def list_trains(who: Viewer, live: Live) -> list[TrainOut]:
     now = time.time()
     return [train_out(t, now) for t in live.train_list()]
 
