@@ -129,6 +129,8 @@ class OnboardTrain:
                 return None
             base = self.base_dec.base_position_m
             self.unit = OnboardUnit(nav, base if base is not None else np.zeros(3), self.track_db, self.sink)
+            # the base is the centre's VRS: the filter models its residual atmosphere (ionosphere-weighted)
+            self.unit.rtk.base_is_vrs = True
         return self.unit
 
     def _update_base(self, unit: OnboardUnit) -> None:
