@@ -94,6 +94,10 @@ DEFAULT_MAX_BASELINE_M = 100_000.0
 # The base's own SPP must agree with its given coordinates within this [m], or the coordinates (or
 # the base data) are wrong and a "fixed" rover would be wrong by the same amount.
 BASE_POSITION_TOLERANCE_M = 100.0
+# ... measured by this many SPP steps from the given coordinates (the first step lands within a
+# millimetre of the converged solution when the coordinates are within a few hundred metres, and
+# anything farther fails the check anyway; the second makes the step size itself a small number)
+BASE_CHECK_SPP_STEPS = 2
 # Prefit screening: code DD innovations beyond this [m] are blunders; a phase DD whose ambiguity is
 # already known (sigma below AMB_KNOWN_SIGMA_CYC) and whose innovation exceeds
 # max(PHASE_INNOVATION_SIGMAS * sigma, PHASE_INNOVATION_MIN_M) is a slip the detectors missed.
@@ -109,8 +113,19 @@ HOLD_AFTER_FIXES = 5
 HOLD_VARIANCE_CYC2 = 0.001
 # A time step longer than this [s] restarts the position/velocity part of the filter.
 MAX_PREDICTION_GAP_S = 30.0
-# Redo the measurement update linearised at the updated position when it moved more than this [m].
+# Redo the measurement update linearised at the updated position when it landed farther than this [m]
+# from the linearisation point (tropospheric delay changes ~0.3 mm per metre of height: 5 cm of
+# linearisation error is ~15 um).
 RELINEARISE_M = 0.05
+# A white-noise kinematic rover is linearised at its last solution carried by its velocity when that
+# is at most this old [s] (else at the state's position, i.e. SPP).
+MAX_LINEARISATION_PREDICTION_S = 5.0
+# ... and, when enough DD phases have established ambiguities (their sigma from the ambiguity and
+# ionosphere states below this [m]: held after a fix), at the position those phases give if their
+# residuals agree to this RMS [m].
+LINEARISATION_SIGMA_M = 0.01
+LINEARISATION_MIN_ROWS = 6
+LINEARISATION_MAX_RMS_M = 0.03
 # Fixed solutions failing the residual check are retried this many times, each without the worst
 # satellite (RTKLIB-EX and commercial engines exclude satellites the same way).
 AR_EXCLUSION_RETRIES = 3
@@ -255,6 +270,7 @@ class RtkFilter:
         self._iono_sigma_now = 0.0
         self._candidate: dict | None = None
         self._candidate_count = 0
+        self._last_solution: tuple[float, np.ndarray, np.ndarray] | None = None
         self.n_kin = 9 if (self.opt.mode == "kinematic" and self.opt.dynamics) else 3
         self.x = np.zeros(self.n_kin)
         self.P = np.zeros((self.n_kin, self.n_kin))
@@ -384,7 +400,7 @@ class RtkFilter:
             # its own SPP selects ephemerides at its own time: the same states when that is the same choice
             same_selection = math.floor(base.time / SELECTION_CACHE_S) == math.floor(t / SELECTION_CACHE_S)
             bspp = solve_spp(base, self.nav, self._spp_options(), initial_m=self.base_position_m,
-                             sat_positions=sp_base if same_selection else None)
+                             sat_positions=sp_base if same_selection else None, steps=BASE_CHECK_SPP_STEPS)
             if bspp.ok:
                 d = float(np.linalg.norm(bspp.position_m - self.base_position_m))
                 self._base_ok = d <= BASE_POSITION_TOLERANCE_M
@@ -545,7 +561,10 @@ class RtkFilter:
             if self.ion_outage[key] > MAX_AMBIGUITY_OUTAGE_EPOCHS:
                 self._drop_ion(key)
 
-        x_rov = self.x[:3].copy()
+        # linearisation point: the state's position, or for a white-noise position (kinematic without
+        # dynamics, restarted from SPP every epoch) the last solution carried by its velocity, usually
+        # within centimetres of where this update lands, so one linearisation serves
+        x_rov = self._predicted_position(t)
         phase_r, code_r, los_r, el_r = self._zero_diff(ro, x_rov, sp_r)
         ok_sat = valid & (el_r >= opt.elevation_mask_rad) & np.isfinite(el_b)
         sd_phase = phase_r[:, :nf] - phase_b[:, :nf]
@@ -574,8 +593,9 @@ class RtkFilter:
             return self._float_or_single(t, spp, age, 0, "too few common satellites above the mask")
         dd = self._dd_index(groups, sats, nf)
         v, H, R, kind = self._build_rows(dd, sd_phase, sd_code, los_r, wl, mu, var_sd)
+        v = v - H[:, :3] @ (self.x[:3] - x_rov)  # innovations against the prior state
         # prefit screening
-        S_diag = np.einsum("ij,jk,ik->i", H, self.P, H) + np.diag(R)
+        S_diag = np.einsum("ij,ij->i", H @ self.P, H) + np.diag(R)
         m = len(dd.k)
         phase_v = v[:m]
         amb_sig2 = self.P[dd.i, dd.i]
@@ -590,13 +610,26 @@ class RtkFilter:
                 self._new_amb(key, obs_sd_cyc[k, key[1]], INIT_AMBIGUITY_SIGMA_CYC**2)
             dd = self._dd_index(groups, sats, nf)
             v, H, R, kind = self._build_rows(dd, sd_phase, sd_code, los_r, wl, mu, var_sd)
+            v = v - H[:, :3] @ (self.x[:3] - x_rov)
         keep = ~((kind == 0) & (np.abs(v) > MAX_CODE_INNOVATION_M))
         if not keep.all():
             v, H, R = v[keep], H[keep], R[np.ix_(keep, keep)]
+        # With established ambiguities the phases alone place the rover to millimetres: linearise there
+        # (a 3-unknown least squares) rather than after a first full update from the SPP prior.
+        x_phase = self._phase_position(v, H, R, kind[keep], x_rov)
+        if x_phase is not None and np.linalg.norm(x_phase - x_rov) > RELINEARISE_M:
+            x_rov = x_phase
+            phase_r, code_r, los_r, el_r = self._zero_diff(ro, x_rov, sp_r)
+            sd_phase = phase_r[:, :nf] - phase_b[:, :nf]
+            sd_code = code_r[:, :nf] - code_b[:, :nf]
+            v, H, R, _ = self._build_rows(dd, sd_phase, sd_code, los_r, wl, mu, var_sd)
+            if not keep.all():
+                v, H, R = v[keep], H[keep], R[np.ix_(keep, keep)]
+            v = v - H[:, :3] @ (self.x[:3] - x_rov)
         x_prior, P_prior = self.x.copy(), self.P.copy()
         self._kalman_update(v, H, R)
-        # Iterated EKF step: when the update moved the position by more than RELINEARISE_M (a
-        # start from SPP), the troposphere and geometry at the rover are recomputed at the new
+        # Iterated EKF step: when the update landed more than RELINEARISE_M from the linearisation
+        # point (a start from SPP), the troposphere and geometry at the rover are recomputed at the new
         # point and the update redone from the same prior.  A few metres of height error in the
         # linearisation point would otherwise bias the height by millimetres (tropospheric delay
         # changes ~0.3 mm per metre of height).
@@ -643,7 +676,46 @@ class RtkFilter:
             # no dynamic model: the velocity (for RMC, odometry) comes from the rover's Dopplers
             sol.velocity_m_s, _ = doppler_velocity(rover, self.nav, sol.position_m, opt.elevation_mask_rad,
                                                    sat_positions=sp_rover)
+        self._last_solution = (t, sol.position_m.copy(), np.asarray(sol.velocity_m_s, dtype=float).copy())
         return sol
+
+    def _phase_position(self, v, H, R, kind, x_lin) -> np.ndarray | None:
+        """The rover position from the DD phases whose ambiguities are established (the row's sigma from
+        the states beyond the position below LINEARISATION_SIGMA_M), by weighted least squares about
+        x_lin; None when fewer than LINEARISATION_MIN_ROWS such phases or when they do not agree to
+        centimetres."""
+        ph = kind == 1
+        if np.count_nonzero(ph) < LINEARISATION_MIN_ROWS:
+            return None
+        Hp = H[ph]
+        # the rows' uncertainty from everything but the position (DD ambiguities, DD ionosphere)
+        Hn = Hp[:, self.n_kin:]
+        var = np.einsum("ij,ij->i", Hn @ self.P[self.n_kin:, self.n_kin:], Hn)
+        use = var < LINEARISATION_SIGMA_M**2
+        if np.count_nonzero(use) < LINEARISATION_MIN_ROWS:
+            return None
+        G = Hp[use, :3]
+        y = v[ph][use] + G @ (self.x[:3] - x_lin)  # innovation at the linearisation point
+        w = 1.0 / np.diag(R)[ph][use]
+        A = G.T @ (G * w[:, None])
+        try:
+            dx = np.linalg.solve(A, G.T @ (w * y))
+        except np.linalg.LinAlgError:
+            return None
+        res = y - G @ dx
+        if not np.all(np.isfinite(dx)) or math.sqrt(float(np.mean(res**2))) > LINEARISATION_MAX_RMS_M:
+            return None
+        return x_lin + dx
+
+    def _predicted_position(self, t: float) -> np.ndarray:
+        """Where to linearise this epoch's measurement update (see `_measurement_update`)."""
+        last = self._last_solution
+        if self.opt.mode == "kinematic" and self.n_kin == 3 and last is not None:
+            t0, p0, v0 = last
+            dt = t - t0
+            if 0.0 < dt <= MAX_LINEARISATION_PREDICTION_S and np.all(np.isfinite(p0)) and np.all(np.isfinite(v0)):
+                return p0 + v0 * dt
+        return self.x[:3].copy()
 
     def _amb_known(self, key) -> bool:
         i = self.amb_index.get(key)
@@ -666,17 +738,26 @@ class RtkFilter:
         return out
 
     def _groups(self, sats, sys_, ok, el, nf) -> list[_Group]:
+        # ambiguity variances per satellite and slot (inf where there is no state)
+        amb_var = np.full(ok.shape, np.inf)
+        diagP = np.diag(self.P)
+        for k, f in zip(*np.nonzero(ok)):
+            i = self.amb_index.get((sats[k], int(f)))
+            if i is not None:
+                amb_var[k, f] = diagP[i]
+        known = amb_var < AMB_KNOWN_SIGMA_CYC**2
         groups = []
         for s in self.opt.systems:
+            in_sys = sys_ == s
             for f in range(nf):
-                members = np.flatnonzero(ok[:, f] & (sys_ == s))
+                members = np.flatnonzero(ok[:, f] & in_sys)
                 if len(members) < 2:
                     continue
                 # reference: highest elevation among satellites with an established ambiguity if any
-                est = [k for k in members if self._amb_known((sats[k], f))]
-                pool = est if est else list(members)
-                ref = max(pool, key=lambda k: el[k])
-                groups.append(_Group([int(ref)] + [int(k) for k in members if k != ref], f))
+                est = members[known[members, f]]
+                pool = est if len(est) else members
+                ref = int(pool[np.argmax(el[pool])])  # the first of equal elevations, as max() takes
+                groups.append(_Group([ref] + [int(k) for k in members if k != ref], f))
         return groups
 
     def _dd_index(self, groups, sats, nf) -> "_DD":
@@ -737,14 +818,14 @@ class RtkFilter:
         return CODE_PHASE_ERROR_RATIO_WITH_IONOSPHERE if self.iono_active else CODE_PHASE_ERROR_RATIO
 
     def _kalman_update(self, v, H, R) -> None:
+        # only the states the rows touch (and the kinematic ones) enter the products
         active = np.flatnonzero(np.any(H != 0.0, axis=0) | (np.arange(len(self.x)) < self.n_kin))
         Ha = H[:, active]
-        Pa = self.P[np.ix_(active, np.arange(len(self.x)))]
-        PHt = Pa.T @ Ha.T  # (nx, m)
-        S = Ha @ self.P[np.ix_(active, active)] @ Ha.T + R
+        PHt = self.P[:, active] @ Ha.T  # (nx, m) = P H^T
+        S = Ha @ PHt[active] + R
         K = np.linalg.solve(S, PHt.T).T  # (nx, m)
         self.x = self.x + K @ v
-        self.P = self.P - K @ (Ha @ Pa)
+        self.P = self.P - K @ PHt.T
         self.P = 0.5 * (self.P + self.P.T)
 
     def _resolve(self, sol: RtkSolution, dd: "_DD", sats, sd_phase, los, wl, mu, x_lin, el) -> None:
@@ -815,6 +896,8 @@ class RtkFilter:
     def _confirm(self, dd: "_DD", sats, rows, x_fix, P_fix) -> int:
         """Count consecutive epochs whose validated fixes agree: every DD ambiguity determined (sigma below
         CONFIRM_SIGMA_CYC) in both this and the previous candidate must have the same integer."""
+        if self._confirm_needed() <= 1:
+            return 1  # declared at once: nothing to compare with
         i, iref = dd.i[rows], dd.iref[rows]
         a = x_fix[i] - x_fix[iref]
         var = P_fix[i, i] + P_fix[iref, iref] - 2.0 * P_fix[i, iref]

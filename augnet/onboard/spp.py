@@ -13,6 +13,7 @@ Bad input never raises: `solve_spp` returns a result with `ok=False` and a messa
 
 from __future__ import annotations
 
+import functools
 import math
 import weakref
 from dataclasses import dataclass, field
@@ -48,6 +49,7 @@ MIN_PLAUSIBLE_HEIGHT_M = -1.0e3
 GROSS_RESIDUAL_M = 1.0e3
 
 
+@functools.lru_cache(maxsize=1024)
 def chi2_quantile(dof: int, p_false_alarm: float = RAIM_FALSE_ALARM) -> float:
     """Upper quantile of the chi-square distribution (Wilson-Hilferty approximation, good to ~1%)."""
     if dof <= 0:
@@ -100,11 +102,16 @@ def satellite_positions(nav: NavigationData, sats: Sequence[str], t_obs: float, 
     t = np.full(n, float(t_obs))
     tau = np.where(np.isfinite(pr), pr, 0.0) / SPEED_OF_LIGHT_M_S
     st = satellite_state(rows, t, -tau)
-    st = satellite_state(rows, t, -(tau + st.clock_bias_s))
-    pos = np.where(valid[:, None], st.position_m, np.nan)
+    # the satellite's clock bias (under a millisecond) moves the transmission time once more: carry the
+    # state by its velocity and drift rather than evaluating the orbit again (the acceleration term
+    # over 1 ms is a micrometre)
+    d = -st.clock_bias_s
+    position = st.position_m + st.velocity_m_s * d[:, None]
+    clock = st.clock_bias_s + st.clock_drift_s_s * d
+    pos = np.where(valid[:, None], position, np.nan)
     vel = np.where(valid[:, None], st.velocity_m_s, np.nan)
     acc = np.where(valid, rows.accuracy_m, np.nan)
-    return SatPositions(pos, vel, np.where(valid, st.clock_bias_s, np.nan),
+    return SatPositions(pos, vel, np.where(valid, clock, np.nan),
                         np.where(valid, st.clock_drift_s_s, np.nan), np.where(valid, idx, -1), valid, acc)
 
 
@@ -230,21 +237,24 @@ def _fail(t, n, msg) -> SppResult:
 
 
 def solve_spp(obs: EpochObs, nav: NavigationData, options: SppOptions | None = None,
-              initial_m=None, sat_positions: SatPositions | None = None) -> SppResult:
+              initial_m=None, sat_positions: SatPositions | None = None, steps: int | None = None) -> SppResult:
     """Position and per-system clocks from slot-0 pseudoranges of one epoch.  Never raises on data.
 
     `sat_positions`: the epoch's satellite states if the caller has them already, computed by
     `satellite_positions(nav, obs.sats, obs.time, first_code(obs))` (what this function would do).
+    `steps`: stop after this many Gauss-Newton steps from `initial_m` instead of iterating to
+    convergence (one step from a point within 100 m is exact to a millimetre: enough to check given
+    coordinates against the data).
     """
     opt = options or SppOptions()
     n = len(obs.sats)
     try:
-        return _solve(obs, nav, opt, initial_m, sat_positions)
+        return _solve(obs, nav, opt, initial_m, sat_positions, steps)
     except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:  # defensive: bad numbers
         return _fail(obs.time, n, f"SPP failed: {exc}")
 
 
-def _solve(obs: EpochObs, nav: NavigationData, opt: SppOptions, initial_m, sp_given=None) -> SppResult:
+def _solve(obs: EpochObs, nav: NavigationData, opt: SppOptions, initial_m, sp_given=None, steps=None) -> SppResult:
     n = len(obs.sats)
     if n == 0:
         return _fail(obs.time, n, "no observations")
@@ -283,7 +293,7 @@ def _solve(obs: EpochObs, nav: NavigationData, opt: SppOptions, initial_m, sp_gi
     excluded: list[str] = []
     exclude_mask = np.zeros(n, bool)
     for _raim_round in range(3):
-        res = _iterate(obs, sp, pr, tgd, iono_scale, usable & ~exclude_mask, sys_, x, opt, alpha, beta)
+        res = _iterate(obs, sp, pr, tgd, iono_scale, usable & ~exclude_mask, sys_, x, opt, alpha, beta, steps)
         if not res.ok or not opt.raim:
             break
         dof = res.n_used - 3 - len(res.clocks_m)
@@ -294,7 +304,7 @@ def _solve(obs: EpochObs, nav: NavigationData, opt: SppOptions, initial_m, sp_gi
         for j in np.flatnonzero(res.used):
             m = exclude_mask.copy()
             m[j] = True
-            r = _iterate(obs, sp, pr, tgd, iono_scale, usable & ~m, sys_, res.position_m, opt, alpha, beta)
+            r = _iterate(obs, sp, pr, tgd, iono_scale, usable & ~m, sys_, res.position_m, opt, alpha, beta, steps)
             if r.ok:
                 d = r.n_used - 3 - len(r.clocks_m)
                 if d > 0 and (best is None or r.chi2 / chi2_quantile(d) < best[1]):
@@ -313,11 +323,11 @@ def _solve(obs: EpochObs, nav: NavigationData, opt: SppOptions, initial_m, sp_gi
     return res
 
 
-def _iterate(obs, sp, pr, tgd, iono_scale, usable, sys_, x0, opt, alpha, beta) -> SppResult:
+def _iterate(obs, sp, pr, tgd, iono_scale, usable, sys_, x0, opt, alpha, beta, steps=None) -> SppResult:
     n = len(obs.sats)
     x = np.array(x0, dtype=float)
     clocks: dict[str, float] = {}
-    for it in range(SPP_MAX_ITERATIONS):
+    for it in range(SPP_MAX_ITERATIONS if steps is None else steps):
         near = np.linalg.norm(x) > NEAR_SURFACE_RADIUS_M
         rng, los = geometric_range(np.where(usable[:, None], sp.position_m, 0.0), x)
         use = usable.copy()
@@ -368,7 +378,8 @@ def _iterate(obs, sp, pr, tgd, iono_scale, usable, sys_, x0, opt, alpha, beta) -
         if np.linalg.norm(dx[:3]) < SPP_CONVERGED_M and near:
             break
     else:
-        return _fail(obs.time, n, "SPP did not converge")
+        if steps is None:
+            return _fail(obs.time, n, "SPP did not converge")
     # residuals after the last update
     rng, _ = geometric_range(np.where(usable[:, None], sp.position_m, 0.0), x)
     pred = rng[idx] + H[:, 3:] @ clk - SPEED_OF_LIGHT_M_S * (sp.clock_s[idx] - tgd[idx]) + corr[idx]
