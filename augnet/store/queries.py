@@ -183,6 +183,19 @@ def quality_history(session: Session, subject: str | None = None, since: dt.date
     return list(session.scalars(q))
 
 
+def quality_rows(session: Session, subject: str | None = None, since: dt.datetime | None = None,
+                 limit: int = 10_000) -> list[tuple[dt.datetime, str, float, float | None, int]]:
+    """quality_history as plain (at, subject, fixed_fraction, residual_rms_m, satellites) rows: no ORM objects,
+    for the console's polled history route."""
+    q = select(QualitySample.at, QualitySample.subject, QualitySample.fixed_fraction, QualitySample.residual_rms_m,
+               QualitySample.satellites).order_by(QualitySample.at).limit(limit)
+    if subject:
+        q = q.where(QualitySample.subject == subject)
+    if since:
+        q = q.where(QualitySample.at >= since)
+    return [tuple(r) for r in session.execute(q)]
+
+
 def audit_log(session: Session, limit: int = 200) -> list[AuditEntry]:
     return list(session.scalars(select(AuditEntry).order_by(AuditEntry.id.desc()).limit(limit)))
 

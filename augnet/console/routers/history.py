@@ -24,9 +24,8 @@ def quality(who: Viewer, session: DB,
     """Quality samples, oldest first: fixed fraction, residual RMS [m], satellites, per baseline or station."""
     if since is not None and since.tzinfo is None:
         since = since.replace(tzinfo=dt.timezone.utc)
-    return [QualityOut(at=utc(s.at), subject=s.subject, fixed_fraction=s.fixed_fraction,
-                       residual_rms_m=s.residual_rms_m, satellites=s.satellites)
-            for s in q.quality_history(session, subject=subject, since=since, limit=limit)]
+    return [QualityOut(at=utc(at), subject=subj, fixed_fraction=ff, residual_rms_m=rms, satellites=n)
+            for at, subj, ff, rms, n in q.quality_rows(session, subject=subject, since=since, limit=limit)]
 
 
 @router.get("/audit", response_model=list[AuditOut])
