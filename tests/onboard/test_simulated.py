@@ -187,14 +187,17 @@ def test_network_70km_with_the_centre_vrs(tmp_path):
     a VRS from its RINEX MARKER TYPE (NON_PHYSICAL) and estimates the residual ionosphere.
 
     Two views: one rover running from the recording's first epoch (the centre starting at the same
-    time: for ~20 s its VRS is a plain geometric shift of a station 35 km away, which must not be
-    fixed on, then network-corrected satellites join), and rovers switched on at VRS_STARTS_S for
-    the time to first fix (median over the starts) and the figures after it.
+    time: for ~20 s its VRS is a plain geometric shift of a station 35 km away, then it carries only
+    the network-corrected satellites, a handful at first, and every satellite continuing across the
+    switch steps by the correction), for safety: no wrong fix, no epoch beyond its protection level;
+    and rovers switched on at VRS_STARTS_S, as trains connecting to the running service, for the
+    time to first fix (median over the starts) and the figures after it.
 
-    Measured when written (240 s): from the first epoch, first fix at 41 s and fixed in every epoch
-    after it; switch-ons: time to first fix 7-10 s (median 9.5), fixed in every epoch after the first
-    fix, H95 1.3 cm, V95 2.0 cm; no wrong fix (every fixed DD integer equals the simulator's), no
-    epoch beyond its protection level.
+    Measured when written (240 s, quiet ionosphere as recalibrated in stations 5423242, kriging
+    interpolation): from the first epoch 218/240 fixed (a first fix at 6 s on the single-base
+    shift, right, lost when the VRS drops to 3 satellites at 21 s, fixed again from 37 s); switch-ons:
+    time to first fix 9 s each, fixed in every epoch after the first fix, H95 1.2 cm, V95 1.9 cm;
+    no wrong fix (every fixed DD integer equals the simulator's), no epoch beyond its protection level.
     """
     from typer.testing import CliRunner
 
@@ -214,14 +217,16 @@ def test_network_70km_with_the_centre_vrs(tmp_path):
     assert vrs.non_physical
     rover = load_obs(tmp_path / "check1.obs")
 
-    # one rover from the first epoch: never a wrong fix, never beyond the protection level
+    # one rover from the first epoch, through the centre's start-up (its VRS changes from a single-base
+    # shift of all satellites to network-corrected ones, a handful at first): never a wrong fix, never
+    # beyond the protection level, fixed at the end
     sols = list(process(rover, vrs, nav, vrs.approx_position_m, RtkOptions()))
     fixed, h, v, over = _errors_and_pl(sols, truth.at([round(s.time) for s in sols]))
-    assert fixed.any(), sols[-1].message
-    first = int(np.argmax(fixed))
-    assert fixed[first:].mean() >= 0.99
     assert not np.any(fixed & (np.hypot(h, v) > WRONG_FIX_M))
     assert not over, over[:3]
+    assert fixed[-VRS_RUN_S:].all()
+    print(f"network-70km VRS from the first epoch: {fixed.sum()}/{len(sols)} fixed, first at "
+          f"{np.argmax(fixed)} s, worst fixed error {np.hypot(h, v)[fixed].max() * 100:.1f} cm")
 
     # rovers switched on while the service runs
     t0 = float(rover.times[0])
