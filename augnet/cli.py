@@ -52,6 +52,14 @@ def _mount() -> None:
             app.add_typer(sub, name=name, help=help_text)
         elif callable(sub):  # a single command, e.g. `augnet rtk --rover ...`
             app.command(name=name, help=help_text)(sub)
+    # The caster's load generator knows nothing of trains; the system adds its train load to it
+    # (`augnet loadtest trains`: many trains with moving GGA on the VRS mountpoint of `augnet up`).
+    try:
+        from augnet.system.loadtest import trains as train_load
+        from ntrip_caster.loadtest import app as loadtest_app
+    except ModuleNotFoundError:
+        return
+    loadtest_app.command(name="trains")(train_load)
 
 
 @app.command()

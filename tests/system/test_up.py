@@ -109,6 +109,22 @@ def test_console_and_caster_serve_while_it_runs(up_run):
     assert "STR;VRS;" in table and "STR;STA1;" in table and "ENDSOURCETABLE" in table
 
 
+def test_many_trains_each_get_their_own_vrs_every_epoch(up_run):
+    """`augnet loadtest trains` (the same code as the 2,000-train benchmark, here 40 trains for 8 s)."""
+    from augnet.system.loadtest import run_trains
+
+    # the VRS carries observations once the network has fixed ambiguities near the trains
+    time.sleep(max(0.0, up_run["started"] + 100 - time.monotonic()))
+    result = run_trains(up_run["state"], 40, 8, 1, "demo", warmup_s=5.0)
+    assert result["connected"] == 40 and result["statuses"] == {"ICY 200 OK": 20, "HTTP/1.1 200 OK": 20}
+    assert result["distinct_vrs_station_ids"] == 40 and result["station_ids_shared"] == 0  # its own VRS each
+    assert result["epochs"] >= 6
+    assert result["lost_epochs"] <= 0.05 * 40 * result["epochs"], result
+    age = result["correction_age_ms"]
+    assert 0 < age["p50"] < 1500 and age["p99"] < 3000, result  # MSM epoch times parsed, ages sane
+    assert result["up_cpu_percent"] is not None
+
+
 # Debian's RTKLIB 2.4.3 b34 rtkrcv opens an "ntripcli" input as FTP (its option table and its stream
 # library number the stream types differently: the console shows "ftp error (11)"), so rtkrcv reads
 # each mountpoint through RTKLIB's own str2str (an NTRIP client, serving the stream on a local TCP port)
