@@ -32,6 +32,7 @@ FIRST_VRS_STATION_ID = 2000
 MAX_STATION_ID = 4095
 SUBJECT_CORRECTIONS = "augnet.corrections.{network}"
 SUBJECT_ALARMS = "augnet.alarms.{network}"
+MAX_CORRECTION_LAG_S = 5.0  # older network corrections are not applied to a new epoch's VRS (network-rtk.md)
 
 
 @dataclass
@@ -59,7 +60,8 @@ class EpochReport:
 class CentreEngine:
     def __init__(self, stations: dict[str, np.ndarray], t_ref_gpst: float, network_name: str = "line",
                  master: str | None = None, config: BaselineConfig | None = None,
-                 ephemerides: list[Ephemeris] | None = None, msm_level: int = 7):
+                 ephemerides: list[Ephemeris] | None = None, msm_level: int = 7,
+                 vrs_before_network: bool = True):
         self.network_name = network_name
         self.stations = {k: np.asarray(v, float) for k, v in stations.items()}
         self.decoders = {name: StationDecoder(name, t_ref_gpst) for name in stations}
@@ -75,6 +77,14 @@ class CentreEngine:
         self.outbox: list[tuple[str, bytes]] = []  # (bus subject, payload) for the service to publish
         self.last: EpochReport | None = None
         self.epochs_solved = 0
+        # Latency: the VRS of epoch t is synthesised from t's master observations and the corrections of
+        # the latest solved network epoch (t - 1 s), then the network solves t. Corrections are smooth
+        # (DD ionosphere changes by well under a mm per second in quiet conditions, network-rtk.md), so
+        # nothing is lost but the solve time on the critical path; a satellite new at t is corrected from
+        # t + 1, and an exclusion decided at t applies from t + 1 (within the 2-epoch requirement).
+        self.vrs_before_network = vrs_before_network
+        self._prev: NetworkEpoch | None = None
+        self.after_serve: Callable[[], None] | None = None  # called once every session's epoch is in its sink
 
     # --- inputs ---------------------------------------------------------------------------------
 
@@ -136,10 +146,28 @@ class CentreEngine:
 
     def _solve(self, t: float, epochs) -> EpochReport:
         eps = {name: epochs.get(name) for name in self.stations}
-        ne = self.network.update(eps, self.nav)
-        self.epochs_solved += 1
         vrs = None
         ids = list(self.sessions)
+        prev = self._prev if self.vrs_before_network and self._prev is not None and t - self._prev.t_gpst <= MAX_CORRECTION_LAG_S else None
+        if prev is not None and ids:
+            vrs = self._serve(ids, prev, eps)
+        ne = self.network.update(eps, self.nav)
+        self._prev = ne
+        self.epochs_solved += 1
+        if prev is None and ids:
+            vrs = self._serve(ids, ne, eps)
+        self.outbox.append((SUBJECT_CORRECTIONS.format(network=self.network_name), correction_model_json(ne)))
+        for alarm in ne.alarms:
+            self.outbox.append((SUBJECT_ALARMS.format(network=self.network_name), json.dumps({
+                "kind": alarm.kind, "subject": alarm.subject, "severity": alarm.severity,
+                "message": alarm.message, "t_gpst": alarm.t_gpst, "cleared": alarm.cleared}).encode()))
+        report = EpochReport(t, ne, vrs, len(ids), sorted(k for k, v in eps.items() if v is not None))
+        self.last = report
+        return report
+
+    def _serve(self, ids: list[str], ne: NetworkEpoch, eps) -> VrsEpoch | None:
+        """Synthesise and encode every session's VRS epoch from `ne`'s corrections and write it to its sink."""
+        vrs = None
         if ids:
             points = np.array([self.sessions[c].point_ecef for c in ids])
             vrs = synthesize(ne, {k: v for k, v in eps.items() if v is not None}, points, self.nav)
@@ -156,14 +184,9 @@ class CentreEngine:
                         log.exception("VRS sink of %s failed", cid)
                     s.bytes_sent += len(data)
                     s.epochs_sent += 1
-        self.outbox.append((SUBJECT_CORRECTIONS.format(network=self.network_name), correction_model_json(ne)))
-        for alarm in ne.alarms:
-            self.outbox.append((SUBJECT_ALARMS.format(network=self.network_name), json.dumps({
-                "kind": alarm.kind, "subject": alarm.subject, "severity": alarm.severity,
-                "message": alarm.message, "t_gpst": alarm.t_gpst, "cleared": alarm.cleared}).encode()))
-        report = EpochReport(t, ne, vrs, len(ids), sorted(k for k, v in eps.items() if v is not None))
-        self.last = report
-        return report
+        if self.after_serve is not None:
+            self.after_serve()
+        return vrs
 
     def drain_outbox(self) -> list[tuple[str, bytes]]:
         out, self.outbox = self.outbox, []

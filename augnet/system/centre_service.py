@@ -64,6 +64,8 @@ class CentreService:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="augnet-centre", daemon=True)
         self.timings = CentreTimings()
+        self._batch: list[tuple[str, bytes]] = []
+        engine.after_serve = self._flush_vrs  # VRS leave as soon as they exist, before the network solve
         self.errors = 0
         self.excluded_stations: set[str] = set()
 
@@ -121,25 +123,33 @@ class CentreService:
             station, data, at = self._inbox.popleft()
             eng.feed(station, data, at)
         t0 = time.perf_counter()
-        self._batch: list[tuple[str, bytes]] = []
         reports = eng.tick(time.time())
+        self._flush_vrs()
         if not reports:
             return
         dt = time.perf_counter() - t0
         self.timings.solve_s.append(dt / len(reports))
         self.timings.epochs += len(reports)
         self.timings.sessions_max = max(self.timings.sessions_max, len(eng.sessions))
-        batch, self._batch = self._batch, []
         outbox = eng.drain_outbox()
         done_at = time.time()
-        self.loop.call_soon_threadsafe(self._deliver, batch, reports, outbox, done_at)
+        self.loop.call_soon_threadsafe(self._deliver, reports, outbox, done_at)
 
-    def _deliver(self, batch, reports, outbox, done_at: float) -> None:
-        """On the loop: every client's epoch to its caster sink, then the reports."""
+    def _flush_vrs(self) -> None:
+        """Worker side: hand the epoch's VRS bytes to the loop in one call."""
+        if self._batch:
+            batch, self._batch = self._batch, []
+            self.loop.call_soon_threadsafe(self._send_vrs, batch)
+
+    def _send_vrs(self, batch) -> None:
+        """On the loop: every client's epoch to its caster sink."""
         for cid, data in batch:
             sink = self._sinks.get(cid)
             if sink is not None:
                 sink(data)
+
+    def _deliver(self, reports, outbox, done_at: float) -> None:
+        """On the loop: the reports of the solved epochs."""
         if self.on_outbox is not None and outbox:
             self.on_outbox(outbox)
         if self.on_epoch is not None:
