@@ -7,6 +7,7 @@ here until the gnss package grows an atmosphere module, and nothing else in onbo
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
 
@@ -54,6 +55,12 @@ KLOBUCHAR_DEFAULT_BETA = (0.1167e06, -0.2294e06, -0.1311e06, 0.1049e07)
 
 def klobuchar_l1_m(t_gpst, lat_rad, lon_rad, azimuth_rad, elevation_rad, alpha, beta):
     """GPS L1 ionospheric group delay [m] (Klobuchar broadcast model).  Scale by (f1/f)^2 for f."""
+    if np.ndim(t_gpst) == 0 and np.ndim(lat_rad) == 0 and np.ndim(lon_rad) == 0 and np.ndim(azimuth_rad) == 1 \
+            and np.shape(azimuth_rad) == np.shape(elevation_rad) and len(alpha) == 4 and len(beta) == 4:
+        # one receiver, many satellites (SPP every iteration): the same formulas compiled
+        return _klobuchar_one_receiver(float(t_gpst), float(lat_rad), float(lon_rad),
+                                       np.asarray(azimuth_rad, dtype=float), np.asarray(elevation_rad, dtype=float),
+                                       np.asarray(alpha, dtype=float), np.asarray(beta, dtype=float))
     el_sc = np.asarray(elevation_rad, dtype=float) / np.pi
     az = np.asarray(azimuth_rad, dtype=float)
     lat_sc = np.asarray(lat_rad, dtype=float) / np.pi
@@ -73,3 +80,31 @@ def klobuchar_l1_m(t_gpst, lat_rad, lon_rad, azimuth_rad, elevation_rad, alpha, 
     day = _KLOB_NIGHT_S + amp * (1.0 - x**2 / 2.0 + x**4 / 24.0)
     delay_s = f * np.where(np.abs(x) < 1.57, day, _KLOB_NIGHT_S)
     return SPEED_OF_LIGHT_M_S * delay_s
+
+
+@njit(cache=True)
+def _klobuchar_one_receiver(t_gpst, lat_rad, lon_rad, az, el, alpha, beta):
+    """`klobuchar_l1_m` for one receiver and a vector of satellites, compiled (term by term the same)."""
+    out = np.empty(len(az))
+    lat_sc = lat_rad / np.pi
+    lon_sc = lon_rad / np.pi
+    tow = np.mod(t_gpst, 86400.0)
+    for k in range(len(az)):
+        el_sc = el[k] / np.pi
+        psi = 0.0137 / (el_sc + 0.11) - 0.022
+        phi_i = min(max(lat_sc + psi * np.cos(az[k]), -0.416), 0.416)
+        lam_i = lon_sc + psi * np.sin(az[k]) / np.cos(phi_i * np.pi)
+        phi_m = phi_i + 0.064 * np.cos((lam_i - 1.617) * np.pi)
+        t_local = np.mod(4.32e4 * lam_i + tow, 86400.0)
+        f = 1.0 + 16.0 * (0.53 - el_sc) ** 3
+        amp = alpha[0] + alpha[1] * phi_m + alpha[2] * phi_m**2 + alpha[3] * phi_m**3
+        per = beta[0] + beta[1] * phi_m + beta[2] * phi_m**2 + beta[3] * phi_m**3
+        amp = max(amp, 0.0)
+        per = max(per, _KLOB_MIN_PERIOD_S)
+        x = 2.0 * np.pi * (t_local - _KLOB_PEAK_LOCAL_TIME_S) / per
+        if abs(x) < 1.57:
+            delay = _KLOB_NIGHT_S + amp * (1.0 - x**2 / 2.0 + x**4 / 24.0)
+        else:
+            delay = _KLOB_NIGHT_S
+        out[k] = SPEED_OF_LIGHT_M_S * f * delay
+    return out

@@ -98,6 +98,7 @@ BASE_POSITION_TOLERANCE_M = 100.0
 # millimetre of the converged solution when the coordinates are within a few hundred metres, and
 # anything farther fails the check anyway; the second makes the step size itself a small number)
 BASE_CHECK_SPP_STEPS = 2
+ROVER_SPP_STEPS = 2
 # Prefit screening: code DD innovations beyond this [m] are blunders; a phase DD whose ambiguity is
 # already known (sigma below AMB_KNOWN_SIGMA_CYC) and whose innovation exceeds
 # max(PHASE_INNOVATION_SIGMAS * sigma, PHASE_INNOVATION_MIN_M) is a slip the detectors missed.
@@ -271,6 +272,7 @@ class RtkFilter:
         self._candidate: dict | None = None
         self._candidate_count = 0
         self._last_solution: tuple[float, np.ndarray, np.ndarray] | None = None
+        self._spp_inputs: tuple | None = None
         self.n_kin = 9 if (self.opt.mode == "kinematic" and self.opt.dynamics) else 3
         self.x = np.zeros(self.n_kin)
         self.P = np.zeros((self.n_kin, self.n_kin))
@@ -367,6 +369,9 @@ class RtkFilter:
         return o
 
     def _single(self, t, spp: SppResult, msg: str, age=math.nan) -> RtkSolution:
+        if spp.ok and not spp.converged and self._spp_inputs is not None:
+            rover, sp_rover, initial = self._spp_inputs
+            spp = solve_spp(rover, self.nav, self._spp_options(), initial_m=initial, sat_positions=sp_rover)
         if spp.ok:
             return RtkSolution(t, Status.SINGLE, spp.position_m, spp.covariance_m2, spp.n_used, age_s=age,
                                message=msg if not spp.message else f"{msg}; {spp.message}")
@@ -378,8 +383,13 @@ class RtkFilter:
         t = rover.time
         # satellite states once per receiver and epoch, shared by SPP, RTK and the Doppler velocity
         sp_rover = satellite_positions(self.nav, rover.sats, t, first_code(rover))
-        spp = solve_spp(rover, self.nav, self._spp_options(),
-                        initial_m=self.x[:3] if self.initialised else None, sat_positions=sp_rover)
+        # From the filter's position (within metres of the code solution) two SPP steps are exact to a
+        # fraction of a millimetre, all RTK needs of it (a prior of 30 m, a 30 m consistency check); a
+        # SINGLE solution, which reports the SPP itself, iterates it to convergence (see `_single`).
+        initial = self.x[:3].copy() if self.initialised else None
+        self._spp_inputs = (rover, sp_rover, initial)
+        spp = solve_spp(rover, self.nav, self._spp_options(), initial_m=initial, sat_positions=sp_rover,
+                        steps=ROVER_SPP_STEPS if initial is not None else None)
         if not spp.ok and self.initialised:
             # the filter's position may be the problem
             spp = solve_spp(rover, self.nav, self._spp_options(), sat_positions=sp_rover)

@@ -226,6 +226,7 @@ class SppResult:
     gdop: float = math.nan
     chi2: float = math.nan
     message: str = ""
+    converged: bool = True  # False when a limited number of `steps` stopped it short of convergence
 
     @property
     def n_used(self) -> int:
@@ -327,6 +328,7 @@ def _iterate(obs, sp, pr, tgd, iono_scale, usable, sys_, x0, opt, alpha, beta, s
     n = len(obs.sats)
     x = np.array(x0, dtype=float)
     clocks: dict[str, float] = {}
+    converged = True
     for it in range(SPP_MAX_ITERATIONS if steps is None else steps):
         near = np.linalg.norm(x) > NEAR_SURFACE_RADIUS_M
         rng, los = geometric_range(np.where(usable[:, None], sp.position_m, 0.0), x)
@@ -380,6 +382,7 @@ def _iterate(obs, sp, pr, tgd, iono_scale, usable, sys_, x0, opt, alpha, beta, s
     else:
         if steps is None:
             return _fail(obs.time, n, "SPP did not converge")
+        converged = False
     # residuals after the last update
     rng, _ = geometric_range(np.where(usable[:, None], sp.position_m, 0.0), x)
     pred = rng[idx] + H[:, 3:] @ clk - SPEED_OF_LIGHT_M_S * (sp.clock_s[idx] - tgd[idx]) + corr[idx]
@@ -392,7 +395,7 @@ def _iterate(obs, sp, pr, tgd, iono_scale, usable, sys_, x0, opt, alpha, beta, s
                          message=f"implausible height {llh[2]:.0f} m")
     chi2 = float(np.sum(v**2 * w))
     gdop = float(np.sqrt(np.trace(np.linalg.inv(H.T @ H))))
-    res = SppResult(True, obs.time, x, clocks, Q[:3, :3], use, resid, [], gdop, chi2, "")
+    res = SppResult(True, obs.time, x, clocks, Q[:3, :3], use, resid, [], gdop, chi2, "", converged)
     if np.any(np.abs(v) > GROSS_RESIDUAL_M):
         res.chi2 = math.inf  # forces RAIM exclusion of the blunder
     return res
