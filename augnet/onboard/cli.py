@@ -33,6 +33,8 @@ def rtk(
     max_age: Annotated[float, typer.Option("--max-age", help="maximum age of corrections [s]")] = 5.0,
     dynamics: Annotated[bool, typer.Option("--dynamics/--no-dynamics", help="kinematic: position-velocity-acceleration model")] = False,
     hold: Annotated[bool, typer.Option("--hold/--no-hold", help="fix-and-hold")] = True,
+    base_kind: Annotated[str, typer.Option("--base-kind", help="auto (the base file's MARKER TYPE: NON_PHYSICAL is a "
+                                           "VRS), station, or vrs (estimate the network's residual ionosphere)")] = "auto",
 ) -> None:
     """Post-process RTK: rover + base RINEX -> solution CSV (time, ECEF, geodetic, status, ratio, sigmas)."""
     from augnet.onboard.inputs import InputError, load_nav, load_obs, parse_position
@@ -48,6 +50,8 @@ def rtk(
         raise typer.BadParameter(f"no known system among {systems!r} (use {SYSTEM_LETTERS})", param_hint="--systems")
     if not 1 <= frequencies <= 3:
         raise typer.BadParameter("1, 2 or 3", param_hint="--frequencies")
+    if base_kind not in ("auto", "station", "vrs"):
+        raise typer.BadParameter("auto, station or vrs", param_hint="--base-kind")
     try:
         navdata, alpha, beta = load_nav(nav)
         rov = load_obs(rover)
@@ -68,7 +72,7 @@ def rtk(
         spp=SppOptions(elevation_mask_rad=math.radians(min(elevation_mask, 10.0)), klobuchar_alpha=alpha,
                        klobuchar_beta=beta, systems=sys_),
     )
-    sols = process(rov, bas, navdata, bp, opt)
+    sols = process(rov, bas, navdata, bp, opt, base_is_vrs=None if base_kind == "auto" else base_kind == "vrs")
     counts: dict[str, int] = {}
 
     def counted():

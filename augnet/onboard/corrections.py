@@ -3,7 +3,8 @@
 Feeds any byte chunks (as they come off the NTRIP connection) through `augnet.gnss.rtcm`'s
 stream reader.  MSM4-7 of GPS, Galileo, BeiDou and QZSS are assembled per epoch (the MSM
 "multiple message" bit says when an epoch is complete; a newer epoch also completes older ones),
-1005/1006 give the reference station's ARP.  Ephemerides are not taken from the stream here: the
+1005/1006 give the reference station's ARP and whether it is a physical station (DF141: a VRS is not,
+and the RTK filter then estimates the network's residual ionosphere).  Ephemerides are not taken from the stream here: the
 rover's own receiver decodes the broadcast navigation message, the same one the caster relays.
 
 Loss of lock: an MSM lock-time indicator that went down (or is zero) since the previous epoch sets
@@ -59,6 +60,7 @@ class CorrectionDecoder:
         self.stats = DecoderStats()
         self.base_position_m: np.ndarray | None = None
         self.station_id: int | None = None
+        self.base_non_physical = False
         self.last_epoch: EpochObs | None = None
         self._pending: dict[float, list] = {}
         self._lock_prev: dict[tuple[str, str], float] = {}
@@ -92,6 +94,8 @@ class CorrectionDecoder:
                 if np.all(np.isfinite(p)) and 6.0e6 < np.linalg.norm(p) < 6.5e6:
                     self.base_position_m = p
                     self.station_id = int(f.get("DF003", 0))
+                    # DF141: 1 = a non-physical (computed) reference station such as a network VRS
+                    self.base_non_physical = bool(f.get("DF141", 0))
                 else:
                     self.stats.decode_errors += 1
             else:

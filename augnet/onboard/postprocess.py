@@ -22,8 +22,9 @@ EPOCH_MATCH_TOLERANCE_S = 0.05
 
 
 def process(rover: ObsArrays, base: ObsArrays, nav: NavigationData, base_position_m,
-            options: RtkOptions | None = None) -> Iterator[RtkSolution]:
-    """Solutions for every rover epoch, in time order."""
+            options: RtkOptions | None = None, base_is_vrs: bool | None = None) -> Iterator[RtkSolution]:
+    """Solutions for every rover epoch, in time order.  `base_is_vrs`: None takes it from the base
+    file's MARKER TYPE."""
     opt = options or RtkOptions()
     rsig = choose_signals(rover, opt.n_slots, opt.systems)
     bsig = choose_signals(base, opt.n_slots, opt.systems)
@@ -32,7 +33,9 @@ def process(rover: ObsArrays, base: ObsArrays, nav: NavigationData, base_positio
     base_times = np.array([e.time for e in base_epochs])
     order = np.argsort(base_times, kind="stable")
     base_times = base_times[order]
-    flt = RtkFilter(nav, base_position_m, opt, base_is_vrs=getattr(base, "non_physical", False))
+    if base_is_vrs is None:
+        base_is_vrs = getattr(base, "non_physical", False)
+    flt = RtkFilter(nav, base_position_m, opt, base_is_vrs=base_is_vrs)
     for ep in rov_epochs:
         k = int(np.searchsorted(base_times, ep.time + EPOCH_MATCH_TOLERANCE_S, side="right")) - 1
         b = base_epochs[order[k]] if k >= 0 else None

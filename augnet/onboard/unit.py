@@ -44,20 +44,26 @@ class UnitOutput:
 class OnboardUnit:
     def __init__(self, nav: NavigationData, base_position_m, track_db: TrackDatabase | None = None,
                  sink: BaliseSink | None = None, options: RtkOptions | None = None,
-                 integrity_risk: float = DEFAULT_INTEGRITY_RISK, lever_arm_m: float = 0.0):
-        self.rtk = RtkFilter(nav, base_position_m, options)
+                 integrity_risk: float = DEFAULT_INTEGRITY_RISK, lever_arm_m: float = 0.0,
+                 base_is_vrs: bool = False):
+        self.rtk = RtkFilter(nav, base_position_m, options, base_is_vrs=base_is_vrs)
         self.track_db = track_db
         self.integrity_risk = integrity_risk
         self.sink = sink or ListSink()
         self.balises = BaliseDetector(track_db, self.sink, lever_arm_m) if track_db is not None else None
 
-    def set_base_position(self, base_position_m) -> None:
-        """A new reference station (or a repositioned VRS): the filter restarts its ambiguities."""
+    def set_base_position(self, base_position_m, non_physical: bool | None = None) -> None:
+        """A new reference station (or a repositioned VRS): the filter restarts its ambiguities.
+
+        `non_physical`: the base is a computed station, a network VRS (RTCM 1005/1006 DF141, which
+        `CorrectionDecoder.base_non_physical` reports); None leaves the filter's belief as it is."""
         import numpy as np
 
         p = np.asarray(base_position_m, dtype=float)
-        if not np.allclose(p, self.rtk.base_position_m, atol=1e-3):
+        vrs = self.rtk.base_is_vrs if non_physical is None else bool(non_physical)
+        if not np.allclose(p, self.rtk.base_position_m, atol=1e-3) or vrs != self.rtk.base_is_vrs:
             self.rtk.base_position_m = p
+            self.rtk.base_is_vrs = vrs
             self.rtk.reset()
 
     def step(self, rover: EpochObs, base: EpochObs | None) -> UnitOutput:

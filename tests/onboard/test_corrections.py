@@ -112,3 +112,27 @@ def test_realtime_path_rtcm_corrections_to_a_fixed_rover(shared_data):
     assert np.max(err) < 0.01
     assert dec.age_s(r_ep[-1].time) == pytest.approx(0.0, abs=1e-3)
     assert math.isinf(CorrectionDecoder().age_s(r_ep[-1].time))
+
+
+def test_reference_station_indicator_marks_a_vrs_and_the_unit_treats_it_as_one():
+    """RTCM 1005/1006 DF141 = 1 (a computed, non-physical station: a network VRS) reaches the filter, which
+    then estimates the network's residual ionosphere; a change of base kind restarts it like a new base."""
+    from augnet.gnss.ephemeris import NavigationData
+    from augnet.gnss.rtcm.station import arp_message
+    from augnet.onboard.unit import OnboardUnit
+
+    xyz = geodetic_deg_to_ecef(39.5, 116.7, 30.0)
+    msg = arp_message(4001, xyz)
+    dec = CorrectionDecoder()
+    dec.feed(encode_frame(msg), gtime.from_calendar(2026, 3, 10))
+    assert dec.base_position_m == pytest.approx(xyz, abs=1e-3) and not dec.base_non_physical
+    msg.fields["DF141"] = 1
+    dec.feed(encode_frame(msg), gtime.from_calendar(2026, 3, 10))
+    assert dec.base_non_physical
+    unit = OnboardUnit(NavigationData([]), xyz)
+    assert not unit.rtk.base_is_vrs
+    unit.rtk.initialised = True
+    unit.set_base_position(dec.base_position_m, non_physical=dec.base_non_physical)
+    assert unit.rtk.base_is_vrs and not unit.rtk.initialised  # restarted as a VRS user
+    unit.set_base_position(dec.base_position_m)  # unchanged: nothing restarts
+    assert unit.rtk.base_is_vrs
