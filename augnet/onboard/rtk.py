@@ -6,9 +6,27 @@ State: rover ECEF position (and velocity and acceleration when the dynamic model
 *single-difference* (rover minus base) carrier ambiguity per satellite and frequency slot, in
 cycles.  Measurements are double differences (per system and slot, against that group's highest
 satellite) of phase and code; forming DDs in the measurement model rather than in the state lets
-satellites rise and set and the reference change without touching the state.  Short baselines are
-assumed: DD ionosphere and troposphere residuals are not estimated (a network VRS or a base within
-~10-20 km keeps them at the centimetre level), the models are applied at each receiver.
+satellites rise and set and the reference change without touching the state.
+
+Atmosphere.  The troposphere model is applied at each receiver.  On a short baseline (under ~7 km) the
+DD ionosphere is millimetres and is not modelled: the filter fixes from the first epoch.  Against a
+network VRS (RINEX MARKER TYPE NON_PHYSICAL, RTCM DF141 = 1) or a longer baseline the filter is
+*ionosphere-weighted*: one SD ionospheric delay per satellite is a state with a prior of sigma0 times
+the thin-shell mapping function (sigma0 2 cm for a VRS -- the network's interpolation residual --
+or 2 mm per km of baseline), phase sees -mu I and code +mu I, and code is weighted down (300:1) since
+the base's multipath is correlated over minutes.  A relative zenith troposphere state was tried and
+left out: over a minute it cannot be told from the height (network-70km VRS: V95 1.9 -> 4.4 cm) and
+the VRS's non-dispersive DD residuals measured there are ~0.5 cm.
+
+Validation.  LAMBDA with partial fixing (the largest decorrelated block with a bootstrapped success
+rate >= 0.999 that passes the ratio test), a fixed position sigma <= 3 cm, DD phase residuals <= 5 cm
+after fixing (else the worst satellite is left out and the search repeated; with the ionosphere
+estimated, the lowest satellite), and with the ionosphere in the model a fix is declared only when
+3 consecutive epochs agree on every well-determined DD integer.  Fix-and-hold after 5 declared fixes.
+The covariance of a fixed solution is the float covariance conditioned on the fixed combinations, so
+it carries the estimated ionosphere's uncertainty: protection levels K sigma bound the error in
+every simulated epoch measured (baseline-10km, network-70km with a VRS under quiet to active
+ionosphere, single-base 35 km).
 
 Status per epoch (RTKLIB's Q codes so tools compare): FIX (1) when a validated integer set is
 applied, FLOAT (2), SINGLE (5) when the rover falls back to SPP (no or stale corrections, base
