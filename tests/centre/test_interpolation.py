@@ -268,8 +268,8 @@ def network_figures():
 
 @pytest.mark.slow
 def test_interpolated_dd_ionosphere_at_35_km_quiet(network_figures):
-    """Measured when written (20 min at 0.5 Hz): 0.95 cm RMS (95 % 1.8 cm); 0.64 cm from the true station
-    residuals (what the non-linear field leaves); the rest is the station residuals' own error (~0.8 cm per
+    """Measured when written (20 min at 0.5 Hz): 0.87-0.95 cm RMS (95 % 1.6-1.8 cm) as the network engine changed
+    under it; 0.62-0.64 cm from the true station residuals (what the non-linear field leaves); the rest is the station residuals' own error (~0.8 cm per
     station and DD: the phase multipath the 30 s smoothing on each baseline leaves, and that smoothing's
     30 s lag behind a DD ionosphere moving ~0.1 mm/s). The margin to the 1 cm target is thin."""
     f = network_figures["quiet"]
@@ -281,9 +281,10 @@ def test_interpolated_dd_ionosphere_at_35_km_quiet(network_figures):
 @pytest.mark.slow
 def test_moderate_and_storm_and_leave_one_out_are_reported(network_figures):
     """Loose bounds only: the figures are printed. Measured when written (10 min each): moderate 1.6 cm
-    (floor 1.5), storm 32 cm (floor 30). Leave-one-out (DDs against the network's reference satellites; a
-    corner of the square predicted from the other three, i.e. extrapolated 50-70 km): 3.1 cm quiet, 6.0 cm
-    moderate, 17 cm storm, the same against the truth."""
+    (floor 1.4-1.5), storm 32-43 cm (floor 29-30; the storm's station residuals themselves are off by more as
+    the engine changed). Leave-one-out (DDs against the network's reference satellites; a corner of the square
+    predicted from the other three, i.e. extrapolated 50-70 km): 3.0-3.1 cm quiet, 5.5-6.0 cm moderate,
+    17-32 cm storm."""
     q, mod, storm = network_figures["quiet"], network_figures["moderate"], network_figures["storm"]
     assert mod["n"] > 1000 and storm["n"] > 1000
     assert q["rms_m"] < mod["rms_m"] < 0.03
