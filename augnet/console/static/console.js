@@ -10,7 +10,7 @@ const ALARM_REFRESH_MS = 2000;        // alarms are raised in the store by the s
 const STATIONS_REFRESH_MS = 5000;     // registry and along-track positions of stations
 const AUDIT_ROWS = 15;
 const SVG_NS = "http://www.w3.org/2000/svg";
-const DIAGRAM = { left: 40, right: 960, trackY: 150, stationY: 168, trainY: 132, baselineTopY: 20 };
+const DIAGRAM = { left: 40, right: 960, trackY: 150, stationY: 168, trainY: 132, baselineTopY: 20, labelGapPx: 36 };
 const ROLE_RANK = { viewer: 0, operator: 1, admin: 2 };
 
 const state = {
@@ -229,16 +229,38 @@ function render() {
   renderTrainMarkers(); renderTrains();
 }
 
+// The centre's summary is free-form; these keys (first found of each group) make the header, the rest is in
+// its tooltip.
+const SUMMARY_FIELDS = [
+  [["epoch_utc", "epoch", "epoch_gpst"], "epoch"],
+  [["master", "master_station"], "master"],
+  [["quality", "quality_flag"], "quality"],
+  [["model", "interpolation", "interpolation_model"], "model"],
+  [["satellites"], "satellites"],
+  [["excluded", "excluded_satellites"], "excluded"],
+  [["correction_age_p99_s"], "corr. age p99 s"],
+];
+
+function summaryValue(v) {
+  if (Array.isArray(v)) return v.length ? v.join(" ") : "none";
+  if (typeof v === "number") return Number.isInteger(v) ? String(v) : v.toFixed(2);
+  if (v !== null && typeof v === "object") return Object.entries(v).map(([k, x]) => k + " " + summaryValue(x)).join(", ");
+  return String(v);
+}
+
 function renderSummary() {
   const n = state.network || {};
   const box = $("network-summary");
-  const items = [];
-  for (const [k, v] of Object.entries(n)) {
-    if (v === null || typeof v === "object") continue;
-    items.push([k.replace(/_/g, " "), typeof v === "number" ? (Number.isInteger(v) ? String(v) : v.toFixed(2)) : String(v)]);
+  const spans = [];
+  for (const [keys, label] of SUMMARY_FIELDS) {
+    const k = keys.find((key) => n[key] !== undefined && n[key] !== null);
+    if (k === undefined) continue;
+    const s = el("span", { "data-summary": k });
+    s.append(el("b", {}, label + ": "), summaryValue(n[k]));
+    spans.push(s);
   }
-  if (Array.isArray(n.excluded_satellites)) items.push(["excluded", n.excluded_satellites.join(" ") || "none"]);
-  box.replaceChildren(...items.map(([k, v]) => { const s = el("span"); s.append(el("b", {}, k + ": "), v); return s; }));
+  box.replaceChildren(...spans);
+  box.title = Object.entries(n).map(([k, v]) => k + ": " + summaryValue(v)).join("\n");
 }
 
 function lineLength() {
@@ -271,14 +293,18 @@ function renderStatic() {
   // stations
   const stationX = new Map();
   const st = [];
-  for (const s of state.stations.values()) {
-    if (s.along_km == null) continue;
+  const placed = [...state.stations.values()].filter((s) => s.along_km != null).sort((a, b) => a.along_km - b.along_km);
+  let lastLabelX = -Infinity, row = 0;
+  for (const s of placed) {
     const x = xOf(s.along_km, length);
     stationX.set(s.code, x);
+    row = x - lastLabelX < DIAGRAM.labelGapPx ? 1 - row : 0;  // close neighbours: labels on alternate rows
+    lastLabelX = x;
     const live = s.live || {};
     const cls = s.enabled === false ? "disabled" : live.up ? "up" : "down";
     const g = svg("g", { class: "station " + cls, "data-station": s.code, transform: `translate(${x.toFixed(1)},${DIAGRAM.stationY})` });
-    g.append(svg("polygon", { points: "0,-10 8,6 -8,6" }), svg("text", { y: 22, "text-anchor": "middle" }, s.code));
+    g.append(svg("polygon", { points: "0,-10 8,6 -8,6" }),
+      svg("text", { y: 22 + row * 13, "text-anchor": "middle" }, s.code));
     g.append(svg("title", {}, `${s.code}: ${cls}, ${live.satellites ?? "?"} satellites`));
     st.push(g);
   }
