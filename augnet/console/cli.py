@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import datetime as dt
 import getpass
+import json
+from pathlib import Path
 
 import typer
 
@@ -86,13 +88,24 @@ def token(name: str = typer.Argument(..., help="operator name"),
 
 @app.command()
 def bench(url: str = typer.Option("http://127.0.0.1:8000", "--url"),
-          token: str = typer.Option(..., "--token", help="any operator's API token (viewer suffices)"),
+          token: str = typer.Option(None, "--token", help="any operator's API token (viewer suffices)"),
+          state: Path = typer.Option(None, "--state", help="the state file `augnet up` writes (augnet-up.json): "
+                                                           "its console URL and admin token"),
           requests: int = typer.Option(200, "--requests", min=10, help="timed requests per route")) -> None:
     """p50 / p99 response time of the main GET routes of a running console (goal: p99 <= 50 ms)."""
     import httpx
 
     from augnet.console.bench import P99_GOAL_MS, measure, overall
 
+    if state is not None:
+        try:
+            info = json.loads(state.read_text())
+            url, token = info["console_url"], token or info["admin_token"]
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise typer.BadParameter(f"cannot read console_url and admin_token from {state}: {exc}",
+                                     param_hint="--state")
+    if not token:
+        raise typer.BadParameter("give --token, or --state with an admin token", param_hint="--token")
     try:
         timings = measure(url, token, requests)
     except httpx.HTTPError as exc:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import pytest
 from typer.testing import CliRunner
 
@@ -82,6 +84,15 @@ def test_bench_measures_every_main_route(tmp_path):
         assert "/api/trains" in r.output and "p99 goal" in r.output
         r = CliRunner().invoke(console_app, ["bench", "--url", server.url, "--token", "wrong", "--requests", "10"])
         assert r.exit_code == 1 and "non-200" in r.output
+        # the state file `augnet up` writes gives the URL and the admin token
+        state = tmp_path / "augnet-up.json"
+        state.write_text(json.dumps({"console_url": server.url + "/", "admin_token": boot.token}))
+        r = CliRunner().invoke(console_app, ["bench", "--state", str(state), "--requests", "10"])
+        assert r.exit_code == 0 and "/metrics" in r.output, r.output
+        state.write_text("{}")
+        r = CliRunner().invoke(console_app, ["bench", "--state", str(state), "--requests", "10"])
+        assert r.exit_code == 2 and "console_url" in r.output
+        assert CliRunner().invoke(console_app, ["bench", "--url", server.url]).exit_code == 2  # no token
     r = CliRunner().invoke(console_app, ["bench", "--url", server.url, "--token", boot.token, "--requests", "10"])
     assert r.exit_code == 2 and "cannot reach" in r.output
 
