@@ -19,8 +19,6 @@ also manages accounts, caster users, mountpoints and stations. Missing or bad to
 
 from __future__ import annotations
 
-import logging
-
 from fastapi import FastAPI, Request, status
 from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
@@ -36,7 +34,6 @@ from augnet.console.routers import live as live_feed
 from augnet.console.routers.page import STATIC_DIR
 from augnet.store import queries as q
 
-log = logging.getLogger(__name__)
 API_PREFIX = "/api"
 
 
@@ -59,8 +56,7 @@ def create_app(sessions: sessionmaker[Session], live: LiveState | None = None) -
     async def invalid_request(_request: Request, exc: RequestValidationError) -> JSONResponse:
         """FastAPI's 422 shape (a list of errors, each with the field's loc), made JSON-safe: an error may
         quote the offending input, and NaN or infinity in a body cannot be written back as JSON."""
-        return JSONResponse({"detail": json_safe(jsonable_encoder(exc.errors()))},
-                            422)
+        return JSONResponse({"detail": json_safe(jsonable_encoder(exc.errors()))}, status_code=422)
 
     @app.exception_handler(q.NotFound)
     async def not_found(_request: Request, exc: q.NotFound) -> JSONResponse:

@@ -43,7 +43,7 @@ def fuzz_console(request, tmp_path_factory):
         q.add_station(s, "fixture", "STA1", to_ecef_m(30.0, 114.0, 20.0), 101, "STA1")
         q.add_mountpoint(s, "fixture", "VRS", "vrs")
         q.add_caster_user(s, "fixture", "train1", "scrypt$10$8$1$AAAA$AAAA", "trains")
-        a = q.raise_alarm(s, "station-down", "STA2", Severity.WARNING)
+        q.raise_alarm(s, "station-down", "STA2", Severity.WARNING)
     with TestClient(create_app(sessions, LiveState())) as client:
         yield client, {"Authorization": f"Bearer {tokens['ada']}"}
     sessions.kw["bind"].dispose()
