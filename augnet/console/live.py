@@ -117,6 +117,8 @@ class LiveState:
         self.caster_snapshot: Callable[[], dict] | None = None
         # Called after an operator's committed change, so the running system can react:
         # on_station_change(code, change); on_caster_change(kind "user" | "mountpoint", name, change).
+        # They may run in a worker thread of the console: hand work to the system's loop with
+        # loop.call_soon_threadsafe. caster_snapshot is called on the console's event loop.
         self.on_station_change: Callable[[str, dict], None] | None = None
         self.on_caster_change: Callable[[str, str, dict], None] | None = None
         self._queue_events = queue_events

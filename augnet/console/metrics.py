@@ -153,7 +153,8 @@ def _gauge(out: list[str], name: str, help_text: str, samples: list[tuple[dict, 
         out.append(f"{name}{labels(**lab)} {number(value)}")
 
 
-def render(request_metrics: RequestMetrics, live: LiveState, session: Session) -> str:
+def render(request_metrics: RequestMetrics, live: LiveState, session: Session,
+           caster_snapshot: dict | None = None) -> str:
     """The whole exposition: request metrics, the live system's state, open alarms."""
     out = request_metrics.lines()
     now = time.time()
@@ -199,7 +200,7 @@ def render(request_metrics: RequestMetrics, live: LiveState, session: Session) -
             "# TYPE augnet_console_live_events_total counter",
             f"augnet_console_live_events_total {live.events_published}"]
 
-    snap = live.caster()
+    snap = caster_snapshot
     if snap is not None:
         _gauge(out, "augnet_caster_clients", "NTRIP clients connected to the caster.",
                [({}, snap.get("clients_now", 0))])

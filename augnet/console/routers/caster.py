@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import logging
 
-from fastapi import APIRouter, Response, status
+from fastapi import APIRouter, Request, Response, status
+from starlette.concurrency import run_in_threadpool
 
 from augnet.console.deps import Admin, DB, Key, Live, Viewer, field_error
 from augnet.console.live import LiveState, json_safe
@@ -60,11 +61,22 @@ def _mount_out(mp: Mountpoint | None, name: str, stats: dict | None) -> Mountpoi
                          write_groups=mp.write_groups, enabled=mp.enabled, in_store=True, stats=stats)
 
 
+def _read(sessions, query, *args, **kwargs):
+    """Run a store query in its own session (in a worker thread: the caller stays on the event loop)."""
+    with sessions() as session:
+        return query(session, *args, **kwargs)
+
+
+# Routes that combine the store with the caster's snapshot are async: the snapshot is taken on the event
+# loop (where `augnet up` runs the caster, so its dicts are not read while they change); the store is read
+# in a worker thread.
+
 @router.get("/mountpoints", response_model=list[MountpointOut])
-def mountpoints(who: Viewer, session: DB, live: Live) -> list[MountpointOut]:
+async def mountpoints(who: Viewer, live: Live, request: Request) -> list[MountpointOut]:
     snap = _snapshot(live)
     mounts = dict((snap or {}).get("mounts") or {})
-    out = [_mount_out(mp, mp.name, mounts.pop(mp.name, None)) for mp in q.list_mountpoints(session)]
+    stored = await run_in_threadpool(_read, request.app.state.sessions, q.list_mountpoints)
+    out = [_mount_out(mp, mp.name, mounts.pop(mp.name, None)) for mp in stored]
     out += [_mount_out(None, name, stats) for name, stats in sorted(mounts.items())]
     return out
 
@@ -113,9 +125,10 @@ def _client_counts(live: LiveState) -> dict[str, int]:
 
 
 @router.get("/users", response_model=list[CasterUserOut])
-def users(who: Viewer, session: DB, live: Live) -> list[CasterUserOut]:
+async def users(who: Viewer, live: Live, request: Request) -> list[CasterUserOut]:
     counts = _client_counts(live)
-    return [_user_out(u, counts) for u in q.list_caster_users(session)]
+    stored = await run_in_threadpool(_read, request.app.state.sessions, q.list_caster_users)
+    return [_user_out(u, counts) for u in stored]
 
 
 @router.post("/users", response_model=CasterUserOut, status_code=status.HTTP_201_CREATED,
@@ -127,18 +140,25 @@ def add_user(body: CasterUserIn, who: Admin, session: DB, live: Live) -> CasterU
     return _user_out(u, {})
 
 
+def _edit_user(sessions, actor: str, name: str, given: dict) -> CasterUser:
+    pw = given.get("password")
+    password_hash = None if pw is None else hash_password(pw)  # scrypt: tens of ms, off the loop
+    with sessions() as session:
+        u = q.update_caster_user(session, actor, name, groups=given.get("groups"), enabled=given.get("enabled"),
+                                 password_hash=password_hash)
+        session.commit()
+        return u
+
+
 @router.patch("/users/{name}", response_model=CasterUserOut, responses={404: {"description": "no such user"}})
-def edit_user(name: Key, body: CasterUserPatch, who: Admin, session: DB, live: Live) -> CasterUserOut:
+async def edit_user(name: Key, body: CasterUserPatch, who: Admin, live: Live, request: Request) -> CasterUserOut:
     given = body.model_dump(exclude_unset=True)
     if not given:
         raise field_error("groups", "give at least one field to change")
     for field, value in given.items():
         if value is None:
             raise field_error(field, "may not be null")
-    pw = given.get("password")
-    u = q.update_caster_user(session, who.name, name, groups=given.get("groups"), enabled=given.get("enabled"),
-                             password_hash=None if pw is None else hash_password(pw))
-    session.commit()
+    u = await run_in_threadpool(_edit_user, request.app.state.sessions, who.name, name, given)
     _tell_system(live, "user", name, {"action": "edit", "groups": u.groups, "enabled": u.enabled,
                                       "password_hash": u.password_hash})
     return _user_out(u, _client_counts(live))

@@ -24,9 +24,9 @@ async def healthz() -> dict:
     return {"status": "ok"}
 
 
-def _render(request: Request) -> str:
+def _render(request: Request, caster_snapshot: dict | None) -> str:
     with request.app.state.sessions() as session:
-        return metrics.render(request.app.state.request_metrics, request.app.state.live, session)
+        return metrics.render(request.app.state.request_metrics, request.app.state.live, session, caster_snapshot)
 
 
 @router.get("/metrics", tags=["meta"], response_class=Response,
@@ -35,5 +35,6 @@ async def prometheus_metrics(request: Request) -> Response:
     """Prometheus text format: request counts and latency histogram per route, trains by fix state,
     stations, baselines, open alarms, websocket subscribers, caster clients. No authentication (as
     scrapers expect): counts and mountpoint names, no credentials."""
-    text = await run_in_threadpool(_render, request)
+    snap = request.app.state.live.caster()  # on the loop, where the caster runs (see routers/caster.py)
+    text = await run_in_threadpool(_render, request, snap)
     return Response(text, media_type=metrics.CONTENT_TYPE)
