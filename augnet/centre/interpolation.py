@@ -12,9 +12,10 @@ Models:
   zero) plus a smooth correlated part that makes the surface pass through every station. In the middle of a
   network it weighs the stations like Han and Rizos' linear combination model (the minimum-norm weights
   that reproduce any plane: 1/4 each at the centre of a square); next to a station it returns that
-  station's own residual, which a single plane does not. Kriging of network RTK residuals: Dai et al., GPS
-  Solutions 7 (2004) compare it with the linear models; Ouassou et al. (Int. J. Navig. Obs. 2015, CPOS
-  network, 60-70 km spacing) and Tang et al. (J. Navigation 69, 2016) found kriging among the best.
+  station's own residual, which a single plane does not. On network RTK residuals, Ouassou et al. (Int. J.
+  Navig. Obs. 2015, Norwegian CPOS network, 60-70 km spacing) found ordinary kriging the best of the
+  interpolators they compared; Tang et al. (J. Navigation 69, 2016) compare kriging with the linear and
+  distance models and their own grid method.
 - ``plane``: the linear interpolation model (LIM) of the seed paper -- a plane through the master in the
   east/north coordinate differences, least-squares fitted over the surrounding stations (Wanninger 1995;
   Han and Rizos 1996). Kept for comparison: measured on ``network-70km`` against the simulator's truth
