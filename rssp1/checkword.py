@@ -6,7 +6,8 @@
 
 So the SSE sender, holding its SEQENQ and the data sender's SID and DATAVER from configuration,
 recovers the data sender's timestamp at TC_R from an SSR: T_i(TC_R) = SEQINI_i ^ SEQENQ_i ^ SID_i ^
-DATAVER_i. From there it predicts T_i(TC) for every later RSD.
+DATAVER_i. It takes TC_R only if that is the data sender's SINIT advanced TC_R cycles (TC_R itself is
+covered by CRC16 only), and from there predicts T_i(TC) for every later RSD (rssp1.endpoint).
 """
 
 from __future__ import annotations

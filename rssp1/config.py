@@ -2,7 +2,9 @@
 
 SID, SINIT and DATAVER are 32-bit per device and per channel, fixed at design time by the signalling
 data preparation (rssp1.md): configuration, never protocol constants. SINIT is the sender's timestamp
-seed, T(0) = SINIT; every device in the captures seeds with its SID, so SINIT defaults to SID.
+seed, T(0) = SINIT; every device in the captures seeds with its SID, so SINIT defaults to SID. A
+receiver checks the TC_R of every SSR against the peer's SINIT (rssp1.endpoint, "TC binding"), so
+both ends must hold the same SINIT for a device, as they must the same SID and DATAVER.
 
 Timing is counted in main cycles. The field example in rssp1.md (250 ms cycle, deltaTime 3, lifeTime 4,
 DelayTime 3) is FIELD_TIMING.

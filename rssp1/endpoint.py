@@ -16,14 +16,30 @@ Receive rules (rssp1.md "Synchronisation and freshness"), in the order applied t
 4. TC <= last accepted TC               -> dropped silently, `repeat`                (repetition,
                                                                                       re-sequencing)
    (right after an SSR, the RSD with TC = TC_R is dropped as `at_sync_point`; see _receive_ssr)
-5. both safety check words (SVC) against the timestamps predicted from the SSR
-                                        -> dropped, `svc`                            (corruption past
-                                                                                      CRC16, wrong SID
-                                                                                      or DATAVER)
+5. both safety check words (SVC) against the peer's timestamp at the frame's TC, T(TC), stepped
+   from the last verified (TC, T) pair   -> dropped, `svc`                            (corruption past
+                                                                                      CRC16, wrong SID)
 6. TC gap >= deltaTime                  -> link down, `gap`; SSE                      (deletion)
 7. TC older than our estimate of the sender's TC by >= deltaTime
                                         -> dropped, `late`                           (delay)
 8. otherwise accepted; the first accepted RSD after an SSR brings the link up.
+
+TC binding. The TC field of every frame is protected by CRC16 only; the safety code covers it
+through the timestamp: SVC_i carries T_i(TC), and T_i(TC) = LFSR_i^TC(SINIT_i) (rssp1.md "Codes":
+T(0) = SID_i by default, T(n) = LFSR_i(T(n-1)); SINIT from configuration, rssp1.config). So a TC label
+is taken only together with a timestamp that belongs to it:
+- an SSR is taken only if the timestamp it reveals, T(TC_R) = SEQINI ^ SEQENQ ^ SID ^ DATAVER, equals
+  the peer's SINIT advanced TC_R cycles (else `ssr_inconsistent`); a refresh SSR only if it continues
+  the verified chain, which is the same test;
+- an RSD is taken only if the timestamp its check words claim equals T(TC) for its TC field, computed
+  from the last verified pair (one step per cycle of gap), which by induction is T(TC) from SINIT.
+Without the first rule a bearer that rewrites TC_R and then the TCs of the following RSDs by the same
+offset (recomputing CRC16) shifts every label: the relative check of step 5 cannot see an offset
+common to the SSR and the RSDs. The same rule refuses an SSR computed with a wrong DATAVER, and with
+a wrong SID unless the SID error cancels at TC_R (TC_R = 0 with SINIT = SID), which the sync-point
+rule and step 5 then catch.
+TC is a u32: when it wraps to 0 the sender's timestamp starts again from SINIT (T is a function of the
+TC field, as the check binds it), and a receiver whose gap crosses the wrap computes T(TC) from SINIT.
 
 While the link is up, accepted frames arriving at lag deltaTime - 1 trigger a refresh SSE; its SSR
 (taken only if its timestamp continues the verified chain) re-anchors the estimate, so clock drift
@@ -32,7 +48,7 @@ between the two ends never drops an authentic link (see _refresh_anchor).
 The SVC check runs before the gap rule so that only a frame that proves it comes from the peer can
 take the link down. A local watchdog drops the link after DelayTime cycles in a row without an
 accepted RSD (`timeout`), which also catches a stream that is entirely late or that never verifies
-(wrong SID or DATAVER). At most one SSE leaves per lifeTime cycles; an SSR counts only when it echoes
+(a wrong SID that got past the SSR check). At most one SSE leaves per lifeTime cycles; an SSR counts only when it echoes
 the TC of our last SSE and arrives less than lifeTime cycles after it.
 """
 
@@ -58,7 +74,7 @@ from rssp1.frames import (
     encode_sse,
     encode_ssr,
 )
-from rssp1.timestamp import TIMESTAMP_CH1, TIMESTAMP_CH2, advance_pair, step_pair
+from rssp1.timestamp import advance_pair, step_pair, timestamp_at
 
 TC_MODULUS = 1 << 32  # TC is a u32 on the wire
 
@@ -116,12 +132,13 @@ class Endpoint:
         self.machine = machine
         self.category = category
         self.stats: Counter[str] = Counter()
-        # Sending side: our TC and timestamps (T(0) = SINIT).
+        # Sending side: our TC and timestamps, T(TC) = LFSR^TC(SINIT).
         self.tc = initial_tc % TC_MODULUS
-        seed = local.timestamp_seed
-        self._t = (TIMESTAMP_CH1.advance(seed[0], self.tc), TIMESTAMP_CH2.advance(seed[1], self.tc))
+        self._seed = local.timestamp_seed
+        self._t = timestamp_at(self._seed, self.tc)
         self._pending_sse: tuple[int, tuple[int, int]] | None = None  # (TC_E, SEQENQ) to answer
         # Receiving side.
+        self._peer_seed = peer.timestamp_seed  # the peer's SINIT: T(TC) of the peer = LFSR^TC(SINIT)
         self.state = LinkState.DOWN
         self.local_cycle = -1  # index of the last cycle run
         self._sse_tc_e: int | None = None
@@ -166,11 +183,20 @@ class Endpoint:
         if ssr.num_dataver != NUM_DATAVER:
             return self._drop("ssr_num_dataver")
         t_r = checkword.timestamp_from_ssr(ssr.seqini, self._sse_seqenq, self.peer.sid, self.peer.dataver)
-        self._sse_tc_e = None
         if self.state is LinkState.UP:
             return self._refresh_anchor(ssr.tc_r, t_r)
+        # TC_R is covered by CRC16 only; the timestamp the SSR reveals is covered by the safety code
+        # (SEQINI). Take TC_R only if that timestamp is T(TC_R), the peer's SINIT advanced TC_R cycles:
+        # otherwise a bearer that shifts TC_R and then every following TC field by the same offset
+        # would shift every label we deliver, since the RSD checks below only bind TC differences.
+        # A refused SSR does not use up our SSE: a good copy of the SSR may still follow.
+        if t_r != timestamp_at(self._peer_seed, ssr.tc_r):
+            return self._drop("ssr_inconsistent")
+        self._sse_tc_e = None
         # The RSD sent with TC_R itself is not taken: at TC_R an error d in the SID we hold for the
-        # peer cancels out (the SSR gives us T ^ d, the RSD claims T ^ d). From TC_R + k on, the
+        # peer cancels out (the SSR gives us T ^ d, the RSD claims T ^ d). The check above sees d
+        # too (with SINIT = SID it compares T ^ d with T ^ M^TC_R d), except where M^TC_R = I: TC_R = 0
+        # (a peer that just started) or 2^32 - 1, the LFSRs' period. From TC_R + k on, the
         # prediction carries M^k d instead, and I ^ M^k is invertible for the gaps a link allows
         # (tests/rssp1/test_faults.py checks k < 64), so a wrong SID never verifies.
         self._last_tc = ssr.tc_r
@@ -190,10 +216,9 @@ class Endpoint:
         its timestamps with SINIT from TC 0, which every device in the captures does; the check words
         are verified exactly as after an SSR.
         """
-        seed = self.peer.timestamp_seed
         before = (tc - 1) % TC_MODULUS
         self._last_tc = before
-        self._last_t = (TIMESTAMP_CH1.advance(seed[0], before), TIMESTAMP_CH2.advance(seed[1], before))
+        self._last_t = timestamp_at(self._peer_seed, before)
         self._anchor_tc, self._anchor_cycle = before, self.local_cycle
         self._missed_cycles = 0
         self._sse_tc_e = None
@@ -207,42 +232,55 @@ class Endpoint:
         10,000), and without this the freshness rule would eventually drop authentic frames and take
         the link down. When accepted frames come in at lag deltaTime - 1, we ask for a fresh SSR
         (bounded by lifeTime, so it cannot hide a delay beyond the limits) and move the estimate to it.
-        Its timestamp must continue the chain we verify RSDs with, else it is refused.
+        Its timestamp must continue the chain we verify RSDs with, else it is refused (and, like a
+        refused first SSR, does not use up our SSE).
         """
         ahead = (tc_r - self._last_tc) % TC_MODULUS
         if ahead >= TC_MODULUS // 2:
             return self._drop("ssr_stale")
-        predicted = (TIMESTAMP_CH1.advance(self._last_t[0], ahead), TIMESTAMP_CH2.advance(self._last_t[1], ahead))
-        if predicted != t_r:
+        if self._timestamp_after(tc_r, ahead) != t_r:  # T(TC_R) from the chain = from SINIT
             return self._drop("ssr_inconsistent")
+        self._sse_tc_e = None
         self._anchor_tc, self._anchor_cycle = tc_r, self.local_cycle
         self.stats["ssr_refresh"] += 1
         return []
 
+    def _timestamp_after(self, tc: int, gap: int) -> tuple[int, int]:
+        """The peer's T(tc), `gap` cycles after the last verified pair (_last_tc, _last_t).
+
+        One LFSR step per cycle of gap; when the gap crosses the u32 wrap of TC (tc < gap), the
+        sender started again from SINIT at TC 0, so T(tc) comes from SINIT.
+        """
+        if tc < gap:
+            return timestamp_at(self._peer_seed, tc)
+        return advance_pair(self._last_t, gap)
+
     def _receive_rsd(self, rsd: Rsd) -> list[Event]:
         if self.state is LinkState.DOWN:
             return self._drop("unsynchronised")
-        gap = (rsd.tc - self._last_tc) % TC_MODULUS
+        tc = rsd.tc
+        gap = (tc - self._last_tc) % TC_MODULUS
         if gap == 0 or gap >= TC_MODULUS // 2:  # not newer (u32 serial-number arithmetic)
             if self.state is LinkState.SYNCING and gap == 0:
                 return self._drop("at_sync_point")
             return self._drop("repeat")
-        t = advance_pair(self._last_t, gap)
+        # T(TC) for this frame's TC field (see _timestamp_after; inlined for the common case)
+        t = advance_pair(self._last_t, gap) if tc >= gap else timestamp_at(self._peer_seed, tc)
         if checkword.timestamp_from_svc(rsd.svc, rsd.data, self.peer.sid) != t:
             return self._drop("svc")
         if gap >= self.timing.delta_time:
             self.stats["dropped_gap"] += 1
             return [FrameDropped("gap"), *self._link_down("gap")]
         estimate = (self._anchor_tc + (self.local_cycle - self._anchor_cycle)) % TC_MODULUS
-        lag = (estimate - rsd.tc) % TC_MODULUS
+        lag = (estimate - tc) % TC_MODULUS
         if lag < TC_MODULUS // 2:
             if lag >= self.timing.delta_time:
                 return self._drop("late")
             if lag and lag >= self.timing.delta_time - 1 and self.state is LinkState.UP:
                 self._refresh_wanted = True  # close to the limit: re-anchor before drift drops us
         else:  # the peer runs ahead of our estimate (its clock is a little faster): follow it
-            self._anchor_tc, self._anchor_cycle = rsd.tc, self.local_cycle
-        self._last_tc, self._last_t = rsd.tc, t
+            self._anchor_tc, self._anchor_cycle = tc, self.local_cycle
+        self._last_tc, self._last_t = tc, t
         self._good_since_tick = True
         self.stats["rx_rsd_ok"] += 1
         events: list[Event] = []
@@ -250,7 +288,7 @@ class Endpoint:
             self.state = LinkState.UP
             self.stats["link_up"] += 1
             events.append(LinkUp(self.local_cycle))
-        events.append(DataReceived(rsd.data, rsd.tc, rsd.machine))
+        events.append(DataReceived(rsd.data, tc, rsd.machine))
         return events
 
     def _link_down(self, reason: str) -> list[Event]:
@@ -310,7 +348,9 @@ class Endpoint:
             frames.append(encode_rsd(src, dst, self.tc, words, data, msg_type=self.machine, category=self.category))
             self.stats["tx_rsd"] += 1
         self.tc = (self.tc + 1) % TC_MODULUS
-        self._t = step_pair(self._t)
+        # T(TC) = LFSR^TC(SINIT): one step per cycle, and SINIT again when TC wraps to 0 (the LFSR's
+        # period is 2^32 - 1, so stepping on would leave T one step ahead of its TC after the wrap)
+        self._t = step_pair(self._t) if self.tc else self._seed
         return frames, events
 
     @property

@@ -1,5 +1,9 @@
 """The per-channel timestamp LFSRs: T(0) = SINIT, T(n) = LFSR(T(n-1)), one LFSR cycle per main cycle.
 
+T is a function of the TC field, T(TC) = M^TC SINIT, which is how the check words bind a TC. Both
+polynomials are primitive: M has order 2^32 - 1, one less than the u32 TC's modulus, so a sender starts
+again from SINIT when its TC wraps to 0 (rssp1.endpoint).
+
 Each channel's LFSR is a 32-bit Galois register shifting left; when the bit shifted out is 1 the
 polynomial is XORed in. One main cycle clocks it 32 times (rssp1.md "Codes"). Polynomials: channel 1
 0x0FC22F87, channel 2 0xC3E887E1.

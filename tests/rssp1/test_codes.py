@@ -80,6 +80,18 @@ def test_lfsr_tables_and_jumps_match_bit_serial():
     assert TIMESTAMP_CH1.advance(x, 100_000) == TIMESTAMP_CH1.advance(TIMESTAMP_CH1.advance(x, 60_001), 39_999)
 
 
+def test_one_cycle_of_each_timestamp_lfsr_has_order_2_pow_32_minus_1():
+    """M^(2^32 - 1) = I, and M^((2^32 - 1) / p) != I for each prime p of 2^32 - 1 = 3 * 5 * 17 * 257 *
+    65537. So for a nonzero SINIT, TCs less than 2^32 - 1 apart have distinct T(TC) (T(TC) binds TC),
+    and T(2^32) = T(1), not T(0): hence the sender restarts from SINIT when its u32 TC wraps
+    (rssp1.endpoint, "TC binding")."""
+    period = (1 << 32) - 1
+    for lfsr in (TIMESTAMP_CH1, TIMESTAMP_CH2):
+        assert lfsr.power_map(period).rows() == [1 << i for i in range(32)]
+        for p in (3, 5, 17, 257, 65537):
+            assert lfsr.power_map(period // p).rows() != [1 << i for i in range(32)], p
+
+
 def test_vector_decodes_verifies_and_round_trips():
     frame = decode_frame(VECTOR)
     assert isinstance(frame, Rsd)

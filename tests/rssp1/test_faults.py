@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from rssp1 import checkword
 from rssp1.config import DeviceConfig, LinkTiming
 from rssp1.crc import crc16
-from rssp1.endpoint import DataReceived, Endpoint, LinkState
+from rssp1.endpoint import DataReceived, Endpoint, FrameDropped, LinkState
 from rssp1.frames import encode_rsd, encode_ssr
 from rssp1.timestamp import timestamp_at
 
@@ -249,6 +249,15 @@ def test_delay_within_limits_is_accepted_beyond_limits_drops_the_link_until_it_e
 
 @pytest.mark.parametrize("wrong", ["sid", "dataver"])
 def test_wrong_sid_or_dataver_never_brings_the_link_up(wrong):
+    """The receiver holds a wrong SID or DATAVER for the sender.
+
+    Changed expectation (a protocol reason, not a tolerance): the SSR reveals the sender's timestamp
+    at TC_R, T(TC_R) = SEQINI ^ SEQENQ ^ SID ^ DATAVER, and the timestamp of a TC is SINIT advanced
+    TC cycles (rssp1.md "Codes": T(0) = SID_i, T(n) = LFSR_i(T(n-1)); SVC_i carries T_i(TC)). Decoded
+    with a wrong SID or DATAVER it is not T(TC_R), so the SSR is refused (`ssr_inconsistent`) and the
+    link never reaches SYNCING. Before TC_R was bound to its timestamp the SSR was taken and every RSD
+    then failed against it (`svc`, `sync_failed`); that path is still tested where the SSR check
+    cannot see a SID error (TC_R = 0, test_wrong_sid_that_cancels_in_the_ssr_...)."""
     real = CENTRE
     if wrong == "sid":
         as_seen = DeviceConfig(real.address, (real.sid[0], real.sid[1] ^ 0x00010000), real.dataver)
@@ -257,13 +266,96 @@ def test_wrong_sid_or_dataver_never_brings_the_link_up(wrong):
     pair = LinkPair(FIELD, sender_as_seen=as_seen)
     events = drive(pair, 40)
     assert received(events) == [] and pair.b.stats["link_up"] == 0
-    assert pair.b.stats["ssr_accepted"] >= 5  # SSRs arrive and are taken ...
-    assert pair.b.stats["sync_failed"] == pair.b.stats["ssr_accepted"] or pair.b.state is LinkState.SYNCING
-    # ... but no RSD verifies against them: each of the 40 is dropped for a reason
     st_ = pair.b.stats
-    assert st_["dropped_svc"] >= 15
-    assert st_["dropped_svc"] + st_["dropped_unsynchronised"] + st_["dropped_at_sync_point"] == 40
+    assert st_["rx_ssr"] >= 5 and st_["dropped_ssr_inconsistent"] == st_["rx_ssr"]  # every SSR refused
+    assert st_["ssr_accepted"] == 0 and st_["sync_failed"] == 0 and pair.b.state is LinkState.DOWN
+    assert st_["dropped_unsynchronised"] == 40  # so no RSD is even checked
     assert pair.a.is_up  # the other direction is fine
+
+
+def test_wrong_sid_that_cancels_in_the_ssr_is_caught_by_the_sync_point_rule_and_the_check_words():
+    """With SINIT = SID, a SID error d shows in the SSR check as (I ^ M^TC_R) d, which is zero at
+    TC_R = 0: a sender that has just started answers an SSE at TC 0. The SSR is then taken, the RSD
+    at TC_R is not (`at_sync_point`: there d cancels too), and from TC_R + 1 on the check words see
+    d (I ^ M^k invertible, test_wrong_sid_cannot_cancel_for_any_allowed_gap)."""
+    as_seen = DeviceConfig(CENTRE.address, (CENTRE.sid[0], CENTRE.sid[1] ^ 0x00010000), CENTRE.dataver)
+    a = Endpoint(CENTRE, RBC, FIELD, initial_tc=0)
+    b = Endpoint(RBC, as_seen, FIELD, initial_tc=50)
+    for f in b.cycle(b"ack")[0]:  # B is down: its SSE
+        a.receive(f)
+    frames = a.cycle(b"data 0")[0]  # the SSR with TC_R = 0, then the RSD with TC 0
+    events = [e for f in frames for e in b.receive(f)]
+    assert b.stats["ssr_accepted"] == 1 and b.stats["dropped_at_sync_point"] == 1
+    for n in range(1, 20):
+        frames_b, events_b = b.cycle(b"ack")
+        events += events_b
+        for f in a.cycle(b"data %d" % n)[0]:
+            events += b.receive(f)
+        for f in frames_b:  # B's next SSEs: answered at TC_R > 0, where the SSR check sees d
+            a.receive(f)
+    assert received(events) == [] and b.stats["link_up"] == 0
+    assert b.stats["dropped_svc"] >= 2 and b.stats["sync_failed"] == 1
+    assert b.stats["ssr_accepted"] == 1 and b.stats["dropped_ssr_inconsistent"] >= 2
+
+
+def test_tc_r_and_following_tcs_shifted_by_the_bearer_are_refused():
+    """The fault Hypothesis found: a bearer flips the same bit of the TC field in every frame and
+    recomputes CRC16, so the SSR's TC_R and the TCs of the RSDs after it move by the same offset.
+    The RSD check words only bind TC differences to timestamp steps, so without binding TC_R to its
+    own timestamp the receiver delivered genuine data under a TC the sender used for other data."""
+    pair = LinkPair(FIELD)
+    sent: dict[int, bytes] = {}
+
+    def shift_tc(cycle, frame):
+        bad = bytearray(frame)
+        bad[6] ^= 1 << 2  # bit 2 of the TC field (TC_R in an SSR)
+        return [with_fixed_crc16(bytes(bad))]
+
+    pair.to_b = shift_tc
+    events = []
+    for n in range(30):
+        sent[pair.a.tc] = b"cycle %d" % n
+        events += pair.step(b"cycle %d" % n)
+    st_ = pair.b.stats
+    assert received(events) == [] and st_["ssr_accepted"] == 0 and st_["link_up"] == 0
+    assert st_["rx_ssr"] >= 5 and st_["dropped_ssr_inconsistent"] == st_["rx_ssr"]
+    pair.to_b = lambda cycle, frame: [frame]  # clean bearer: up within the bound, labels right
+    for n in range(FIELD.resync_bound_cycles):
+        sent[pair.a.tc] = b"clean %d" % n
+        events += pair.step(b"clean %d" % n)
+    assert pair.b.is_up
+    got = [e for e in events if isinstance(e, DataReceived)]
+    assert got and all(sent[e.tc] == e.data for e in got)
+
+
+def test_every_tc_r_bit_flip_past_crc16_is_refused_and_keeps_the_sse_open():
+    pair = LinkPair(FIELD)
+    captured: list[bytes] = []
+    pair.to_b = lambda cycle, frame: captured.append(frame) or []
+    pair.step()  # B sends its SSE
+    pair.step()  # A answers: SSR (to the capture)
+    ssr = next(f for f in captured if f[1] == 0x91)
+    for bit in range(32):
+        bad = bytearray(ssr)
+        bad[6 + bit // 8] ^= 1 << (bit % 8)
+        assert pair.b.receive(with_fixed_crc16(bytes(bad))) == [FrameDropped("ssr_inconsistent")], bit
+    assert pair.b.stats["dropped_ssr_inconsistent"] == 32 and pair.b.state is LinkState.DOWN
+    # a refused SSR does not use up the SSE: the true SSR, arriving later within lifeTime, is taken
+    assert pair.b.receive(ssr) == [] and pair.b.state is LinkState.SYNCING
+
+
+def test_sinit_from_configuration_is_what_tc_r_is_checked_against():
+    """SINIT (T(0)) is per-device configuration (rssp1.md); both ends must hold the same value."""
+    centre = DeviceConfig(CENTRE.address, CENTRE.sid, CENTRE.dataver, sinit=(0x0BADF00D, 0x600DCAFE))
+    pair = LinkPair(FIELD, sender=centre)
+    pair.bring_up()
+    assert len(received(drive(pair, 10))) == 10
+    # the receiver holds the default SINIT (= SID) for a sender seeded otherwise: every SSR refused
+    pair = LinkPair(FIELD, sender=centre, sender_as_seen=CENTRE)
+    events = drive(pair, 20)
+    st_ = pair.b.stats
+    assert received(events) == [] and st_["ssr_accepted"] == 0
+    assert st_["rx_ssr"] >= 3 and st_["dropped_ssr_inconsistent"] == st_["rx_ssr"]
 
 
 @pytest.mark.parametrize(
@@ -297,6 +389,41 @@ def test_tc_wraps_around_u32():
     events = drive(pair, 20)
     assert len(received(events)) == 20 and downs(events) == []
     assert pair.a.tc < 100
+
+
+def test_after_the_tc_wrap_the_timestamp_restarts_from_sinit_and_the_link_resynchronises():
+    """T is a function of the TC field, T(TC) = LFSR^TC(SINIT), which is what binds a TC label. The
+    LFSRs' period is 2^32 - 1, not 2^32, so the sender starts again from SINIT when TC wraps to 0
+    (stepping on would leave T(0) = LFSR(SINIT)); an SSR after the wrap is then checked like any
+    other, and a receiver whose gap crosses the wrap takes T(TC) from SINIT."""
+    pair = LinkPair(FIELD, initial_tc=(1 << 32) - 10)
+    pair.bring_up()  # SSR before the wrap
+    sent: dict[int, bytes] = {}
+    lost = set()
+    pair.to_b = lambda cycle, frame: [] if cycle in lost else [frame]
+    events = []
+    for n in range(12):
+        if pair.a.tc == (1 << 32) - 1:
+            lost.add(pair.cycle_no)  # the RSD at TC 2^32 - 1 is lost: the next gap (2) crosses the wrap
+        sent[pair.a.tc] = b"w%d" % n
+        events += pair.step(b"w%d" % n)
+        assert pair.a._t == timestamp_at(CENTRE.timestamp_seed, pair.a.tc)
+    got = [e for e in events if isinstance(e, DataReceived)]
+    assert len(got) == 11 and all(sent[e.tc] == e.data for e in got) and downs(events) == []
+    tcs = [e.tc for e in got]
+    assert (1 << 32) - 1 not in tcs and tcs.index(0) > 0 and tcs[tcs.index(0) - 1] == (1 << 32) - 2
+    # an outage after the wrap: the link drops and resynchronises with an SSR whose TC_R is small
+    pair.to_b = lambda cycle, frame: []
+    events = pair.run(6)
+    assert downs(events) == ["timeout"]
+    pair.to_b = lambda cycle, frame: [frame]
+    events = pair.run(FIELD.resync_bound_cycles)
+    assert pair.b.is_up and pair.b.stats["ssr_accepted"] == 2 and pair.b.stats["dropped_ssr_inconsistent"] == 0
+    # a monitor primed at TC 0 verifies the first frame after a wrap
+    mon = Endpoint(RBC, CENTRE, FIELD)
+    mon.monitor_from(0)
+    t0 = timestamp_at(CENTRE.timestamp_seed, 0)
+    assert received(mon.receive(encode_rsd(CENTRE.address, RBC.address, 0, checkword.svc(b"z", CENTRE.sid, t0), b"z")))
 
 
 @settings(max_examples=300, deadline=None)

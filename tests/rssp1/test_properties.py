@@ -1,12 +1,15 @@
-"""Property: whatever a faulty bearer does, the receiver delivers only data the sender sent, at the
-TC it was sent with, in strictly increasing TC order, each at most once; and once the bearer is
-clean again the link is back within the configured bound."""
+"""Property: whatever a faulty bearer does (drop, duplicate, hold and release reversed, flip a bit
+with or without recomputing CRC16, flip the same bit of every frame and recompute CRC16, replay), the
+receiver delivers only data the sender sent, at the TC it was sent with, in strictly increasing TC
+order, each at most once; and once the bearer is clean again the link is back within the configured
+bound."""
 
 from __future__ import annotations
 
+import os
 import struct
 
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from rssp1.config import LinkTiming
@@ -16,12 +19,24 @@ from rssp1.endpoint import DataReceived
 from .linkpair import LinkPair
 
 TIMING = LinkTiming(cycle_s=0.25, delta_time=3, life_time=4, delay_time=3)
-ACTIONS = st.sampled_from(["deliver", "drop", "duplicate", "hold", "flip", "flip_fix_crc", "release", "replay_old"])
+# More examples for a deeper run: RSSP1_PROPERTY_EXAMPLES=20000 pytest tests/rssp1/test_properties.py
+MAX_EXAMPLES = int(os.environ.get("RSSP1_PROPERTY_EXAMPLES", "120"))
+ACTIONS = st.sampled_from(
+    ["deliver", "drop", "duplicate", "hold", "flip", "flip_fix_crc", "stuck_fix_crc", "release", "replay_old"]
+)
+# stuck_fix_crc: a faulty bearer element that flips the same bit of every frame it passes and then
+# recomputes CRC16; the bit is drawn once per example among the first 20 bytes (in every frame type).
+# On the TC field it shifts TC_R and the TCs after it alike: the relabelling fault of the @example.
 
 
-@settings(max_examples=120, deadline=None)
-@given(st.lists(st.tuples(ACTIONS, ACTIONS, st.integers(0, 10_000)), min_size=5, max_size=60))
-def test_faulty_bearer_never_breaks_the_delivery_invariants(plan):
+@settings(max_examples=MAX_EXAMPLES, deadline=None)
+@given(st.lists(st.tuples(ACTIONS, ACTIONS, st.integers(0, 10_000)), min_size=5, max_size=60), st.integers(0, 159))
+# Found by Hypothesis: bit 50 is bit 2 of the TC field. The SSR's TC_R goes 1005 -> 1001 and the next
+# RSD's TC 1006 -> 1002, CRC16 recomputed both times; before TC_R was bound to its own timestamp the
+# receiver delivered b"cycle 6" labelled TC 1002 (see Endpoint._receive_ssr).
+@example(plan=[("deliver", "deliver", 0), ("drop", "deliver", 0), ("deliver", "deliver", 0), ("deliver", "deliver", 0),
+               ("deliver", "deliver", 0), ("flip_fix_crc", "deliver", 50), ("flip_fix_crc", "deliver", 50)], stuck_bit=0)
+def test_faulty_bearer_never_breaks_the_delivery_invariants(plan, stuck_bit):
     pair = LinkPair(TIMING)
     sent: dict[int, bytes] = {}
     history: list[bytes] = []
@@ -43,10 +58,13 @@ def test_faulty_bearer_never_breaks_the_delivery_invariants(plan):
                 out = held[::-1] + [frame]  # held frames come out late and reversed
                 held.clear()
                 return out
-            if action in ("flip", "flip_fix_crc"):
-                bit = seed % (len(frame) * 8)
+            if action in ("flip", "flip_fix_crc", "stuck_fix_crc"):
+                bit = stuck_bit if action == "stuck_fix_crc" else seed % (len(frame) * 8)
                 bad = bytearray(frame)
                 bad[bit // 8] ^= 1 << (bit % 8)
+                if action == "stuck_fix_crc":
+                    bad[-2:] = struct.pack("<H", crc16(bytes(bad[:-2])))
+                    return [bytes(bad)]
                 if action == "flip_fix_crc":
                     bad[-2:] = struct.pack("<H", crc16(bytes(bad[:-2])))
                 return [bytes(bad), frame] if seed % 2 else [bytes(bad)]
