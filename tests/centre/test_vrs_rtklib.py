@@ -26,9 +26,11 @@ rnx2rtkp settings, two sets, every figure printed for both:
 
 Measured when written, check1 from the first epoch, quiet ionosphere, five recordings (this one; 1 Hz; start
 05:00; the network engine as committed and with a colleague's work in progress): CONFIG 83-95 % fixed after the
-first fix; CONFIG_VRS 100 % in all five, H95 0.7-1.3 cm (moderate ionosphere: 1.4-2.0 cm), with one wrong
-fixed epoch (its first fix, 48 cm, 8 satellites, 106 s) on the 05:00 recording. Every physical station 35 km
-away as base: never fixed, with either set.
+first fix; CONFIG_VRS 100 % in all five, H95 0.7-1.3 cm, with one wrong fixed epoch (its first fix, 48 cm,
+8 satellites, 106 s) on the 05:00 recording. Moderate ionosphere (two recordings): CONFIG_VRS 55-100 % (a
+wrong first fix on a few-satellite start-up epoch, then float for minutes), H95 1.4-2.5 cm once fixed.
+Storm: the VRS never fixes (float H95 1.3 m). Every physical station 35 km away as base: never fixed, with
+either set, at any level.
 """
 
 from __future__ import annotations
