@@ -84,6 +84,7 @@ class CentreEngine:
         # t + 1, and an exclusion decided at t applies from t + 1 (within the 2-epoch requirement).
         self.vrs_before_network = vrs_before_network
         self._prev: NetworkEpoch | None = None
+        self.serving_t = np.nan  # epoch whose VRS are being produced (GPST s)
         self.after_serve: Callable[[], None] | None = None  # called once every session's epoch is in its sink
 
     # --- inputs ---------------------------------------------------------------------------------
@@ -149,6 +150,7 @@ class CentreEngine:
         vrs = None
         ids = list(self.sessions)
         prev = self._prev if self.vrs_before_network and self._prev is not None and t - self._prev.t_gpst <= MAX_CORRECTION_LAG_S else None
+        self.serving_t = t
         if prev is not None and ids:
             vrs = self._serve(ids, prev, eps)
         ne = self.network.update(eps, self.nav)

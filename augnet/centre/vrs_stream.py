@@ -9,7 +9,9 @@ Per epoch and client, in this order (what RTKLIB and commercial rovers expect of
 
 The MSM of one system is encoded for every client in one batch (`encode_msm_batch`). Lock times and
 whole-cycle phase offsets (MSM holds the phase within +-1171 m of the code) are kept per client, satellite
-and signal; a change of master station changes the VRS ambiguities, so it restarts every lock.
+and signal; a change of master station changes the VRS ambiguities, so it restarts every lock, and a
+satellite switching between network-corrected and uncorrected data restarts its own. The 1006 flags the
+station as non-physical (DF141 = 1, RTCM 10403.3: a computed reference station).
 """
 
 from __future__ import annotations
@@ -63,6 +65,10 @@ class VrsStreamEncoder:
         self._keys: dict[tuple[str, str], int] = {}
         self._lock_t0 = np.full((0, 0), np.nan)
         self._offset = np.zeros((0, 0))
+        # whether the signal was network-corrected at the last epoch (NaN: not sent): a change of
+        # correction source (network <-> the master's plain shift) steps the VRS phase by the residual
+        # atmosphere, cm, without a slip at the master, so the lock restarts and the rover knows
+        self._corrected = np.full((0, 0), np.nan)
 
     def _grow(self, rows: int, keys: int) -> None:
         r0, k0 = self._lock_t0.shape
@@ -71,14 +77,17 @@ class VrsStreamEncoder:
         r1, k1 = max(rows, 2 * r0, 16), max(keys, 2 * k0, 64)
         t0 = np.full((r1, k1), np.nan)
         off = np.zeros((r1, k1))
+        corr = np.full((r1, k1), np.nan)
         t0[:r0, :k0] = self._lock_t0
         off[:r0, :k0] = self._offset
-        self._lock_t0, self._offset = t0, off
+        corr[:r0, :k0] = self._corrected
+        self._lock_t0, self._offset, self._corrected = t0, off, corr
 
     def add(self, client_id: str, station_id: int, point_ecef) -> None:
         row = self._free_rows.pop() if self._free_rows else len(self.clients)
         self._grow(row + 1, len(self._keys))
         self._lock_t0[row] = np.nan
+        self._corrected[row] = np.nan
         self._grow_eph(row + 1, len(self._sat_ids))
         self._eph_sent[row] = -1
         self.clients[client_id] = Client(station_id, np.asarray(point_ecef, float), row)
@@ -147,7 +156,7 @@ class VrsStreamEncoder:
                 self._lock_t0[c.row] = np.nan  # new master, new ambiguities: every lock restarts
             c.master = vrs.master[i]
             if c.moved or t - c.last_arp >= STATION_INTERVAL_S:
-                out[cid] += encode_frame(arp_message(c.station_id, c.point, antenna_height_m=0.0))
+                out[cid] += encode_frame(arp_message(c.station_id, c.point, antenna_height_m=0.0, non_physical=True))
                 out[cid] += encode_frame(descriptor_message(c.station_id, f"VRS{c.station_id}", VRS_ANTENNA,
                                                             VRS_RECEIVER, FIRMWARE))
                 c.last_arp = t
@@ -204,7 +213,11 @@ class VrsStreamEncoder:
                 t0 = self._lock_t0[np.ix_(rows_c, keys)]
                 off = self._offset[np.ix_(rows_c, keys)]
                 have = np.isfinite(cp[:, rows, j])
-                restart = have & (np.isnan(t0) | ((vrs.lli[:, cols[rows], slot] & 1) != 0))
+                corr_now = vrs.corrected[:, cols[rows]].astype(float)
+                corr_before = self._corrected[np.ix_(rows_c, keys)]
+                switched = np.isfinite(corr_before) & (corr_before != corr_now)
+                self._corrected[np.ix_(rows_c, keys)] = np.where(have, corr_now, np.nan)
+                restart = have & (np.isnan(t0) | ((vrs.lli[:, cols[rows], slot] & 1) != 0) | switched)
                 lam = SPEED_OF_LIGHT_M_S / vrs.freq_hz[cols[rows], slot]
                 new_off = phase_offset_cycles(pr[:, rows, j], cp[:, rows, j], lam[None, :])
                 t0 = np.where(restart, t, np.where(have, t0, np.nan))

@@ -21,6 +21,7 @@ from typing import Callable
 import numpy as np
 
 from augnet.centre.engine import CentreEngine, EpochReport
+from augnet.gnss import time as gtime
 
 log = logging.getLogger(__name__)
 
@@ -32,6 +33,10 @@ class CentreTimings:
     """Per solved epoch: wall time spent [s] (for the live view and the run report)."""
 
     solve_s: collections.deque = field(default_factory=lambda: collections.deque(maxlen=600))
+    # VRS of an epoch handed to the loop, and written to every client's socket: host clock minus the
+    # epoch's GPS time [s] (the centre's share of the correction age)
+    vrs_ready_s: collections.deque = field(default_factory=lambda: collections.deque(maxlen=600))
+    vrs_sent_s: collections.deque = field(default_factory=lambda: collections.deque(maxlen=600))
     epochs: int = 0
     sessions_max: int = 0
 
@@ -139,14 +144,25 @@ class CentreService:
         """Worker side: hand the epoch's VRS bytes to the loop in one call."""
         if self._batch:
             batch, self._batch = self._batch, []
-            self.loop.call_soon_threadsafe(self._send_vrs, batch)
+            t = self.engine.serving_t
+            self.timings.vrs_ready_s.append(gtime.now_gpst() - t)
+            self.loop.call_soon_threadsafe(self._send_vrs, batch, t)
 
-    def _send_vrs(self, batch) -> None:
+    def _send_vrs(self, batch, t_gpst: float) -> None:
         """On the loop: every client's epoch to its caster sink."""
         for cid, data in batch:
             sink = self._sinks.get(cid)
             if sink is not None:
                 sink(data)
+        self.timings.vrs_sent_s.append(gtime.now_gpst() - t_gpst)
+
+    def latency_ms_p99(self, recent: int = 60) -> dict:
+        """p99 over the last `recent` epochs (the live picture, not the start-up burst)."""
+        out = {}
+        for name in ("vrs_ready_s", "vrs_sent_s"):
+            d = list(getattr(self.timings, name))[-recent:]
+            out[name[:-2] + "_ms_p99"] = round(float(np.percentile(np.array(d), 99)) * 1000.0, 1) if d else None
+        return out
 
     def _deliver(self, reports, outbox, done_at: float) -> None:
         """On the loop: the reports of the solved epochs."""

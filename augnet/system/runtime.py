@@ -90,6 +90,7 @@ class RunSummary:
     stations: list[str]
     network_epochs: int = 0
     centre_solve_ms_p99: float | None = None
+    centre_latency: dict = field(default_factory=dict)
     centre_errors: int = 0
     trains: dict = field(default_factory=dict)
     alarms: list = field(default_factory=list)
@@ -401,7 +402,7 @@ class System:
             "excluded": sorted(ne.excluded), "sessions": r.sessions,
             "vrs_model": _model_names(r), "misclosures": ne.misclosures,
             "correction_age_p99_s": float(np.nanpercentile(ages, 99)),
-            "solve_ms_p99": self.centre.solve_ms_p99(), "rbc": self.rbc.snapshot() if self.rbc else None,
+            "solve_ms_p99": self.centre.solve_ms_p99(), **self.centre.latency_ms_p99(), "rbc": self.rbc.snapshot() if self.rbc else None,
             "updated_unix": now,
         })
 
@@ -509,6 +510,7 @@ class System:
         if self.centre is not None:
             out.network_epochs = self.centre.timings.epochs
             out.centre_solve_ms_p99 = self.centre.solve_ms_p99()
+            out.centre_latency = self.centre.latency_ms_p99()
             out.centre_errors = self.centre.errors
         for tid, tr in self.trains.items():
             lat = np.array(tr.stats.correction_latency_s) if tr.stats.correction_latency_s else np.array([np.nan])

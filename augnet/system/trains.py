@@ -129,8 +129,6 @@ class OnboardTrain:
                 return None
             base = self.base_dec.base_position_m
             self.unit = OnboardUnit(nav, base if base is not None else np.zeros(3), self.track_db, self.sink)
-            # the base is the centre's VRS: the filter models its residual atmosphere (ionosphere-weighted)
-            self.unit.rtk.base_is_vrs = True
         return self.unit
 
     def _update_base(self, unit: OnboardUnit) -> None:
@@ -140,7 +138,8 @@ class OnboardTrain:
         if self.base_position is None or sid != self.base_station_id:
             if self.base_position is not None:
                 self.stats.base_resets += 1
-            unit.set_base_position(p)  # a new base: the filter restarts
+            # a new base: the filter restarts; DF141 says whether it is a VRS (its atmosphere modelled)
+            unit.set_base_position(p, non_physical=self.base_dec.base_non_physical)
         elif not np.allclose(p, self.base_position, atol=1e-3):
             unit.rtk.base_position_m = np.asarray(p, float)  # the same VRS moved: ambiguities carry over
             self.stats.base_moves += 1

@@ -9,11 +9,13 @@ from augnet.gnss.rtcm.codec import RtcmMessage, text_fields
 MS_PER_WEEK = 7 * 86_400_000
 
 
-def arp_message(station_id: int, ecef_m, antenna_height_m: float | None = None) -> RtcmMessage:
+def arp_message(station_id: int, ecef_m, antenna_height_m: float | None = None,
+                non_physical: bool = False) -> RtcmMessage:
     """1005 (or 1006 with an antenna height): stationary antenna reference point, GPS + Galileo flagged
-    (BDS is signalled by its MSM). A VRS sets DF022-DF024 the same way and is "physical station 0"."""
+    (BDS is signalled by its MSM). A VRS sets DF022-DF024 the same way and DF141 = 1 (non-physical, a
+    computed reference station, RTCM 10403.3 DF141), which rovers read to model its residual atmosphere."""
     x, y, z = (float(v) for v in ecef_m)
-    fields = dict(DF003=station_id, DF021=0, DF022=1, DF023=0, DF024=1, DF141=0, DF025=x, DF142=1,
+    fields = dict(DF003=station_id, DF021=0, DF022=1, DF023=0, DF024=1, DF141=int(bool(non_physical)), DF025=x, DF142=1,
                   DF001_1=0, DF026=y, DF364=0, DF027=z)
     if antenna_height_m is None:
         return RtcmMessage(1005, dict(DF002=1005, **fields))
