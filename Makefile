@@ -6,13 +6,14 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 SUDO   := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
-# Debian packages the tests drive: RTKLIB (convbin, rnx2rtkp, str2str, rtkrcv) and curl.
-DEBS   := rtklib curl
-DEB_CHECK := command -v rnx2rtkp >/dev/null && command -v convbin >/dev/null && command -v str2str >/dev/null && command -v curl >/dev/null
+# Debian packages the tests drive: RTKLIB (convbin, rnx2rtkp, str2str, rtkrcv), curl, and headless
+# Chromium with its WebDriver for the console's browser test.
+DEBS   := rtklib curl chromium chromium-driver
+DEB_CHECK := command -v rnx2rtkp >/dev/null && command -v convbin >/dev/null && command -v str2str >/dev/null && command -v rtkrcv >/dev/null && command -v curl >/dev/null && command -v chromium >/dev/null && command -v chromedriver >/dev/null
 
 .PHONY: run test bench debs venv clean
 
-run: venv debs
+run: venv
 	$(VENV)/bin/augnet up demo
 
 test: venv debs
