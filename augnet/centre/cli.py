@@ -47,11 +47,3 @@ def vrs(
     for line in lines:
         typer.echo(line)
     typer.echo(f"wrote {out}: {len(result.epochs)} epochs")
-
-
-@app.command("run")
-def run() -> None:
-    """The live control centre (arrives with the caster integration of issue 5; not available yet)."""
-    typer.echo("augnet centre run: the live centre is not built yet; it arrives with the caster integration "
-               "(issue 5). For post-processing use `augnet vrs`.", err=True)
-    raise typer.Exit(1)
