@@ -54,9 +54,11 @@ C = SPEED_OF_LIGHT_M_S
 # An epoch is processed when at least this many stations observed it: one baseline is the least a network
 # solution (and so anything beyond a single-base shift) needs.
 MIN_STATIONS_PER_EPOCH = 2
-# Network-corrected satellites a VRS epoch needs to be written as such: an RTK rover needs at least four
-# double differences (five satellites) to position; with fewer the epoch is a single-base VRS instead.
-MIN_CORRECTED_SATELLITES = 5
+# Network-corrected satellites a VRS epoch needs to be written as such. An RTK rover needs four double
+# differences to position, but across three systems five satellites give only two or three, and RTKLIB
+# then fixes on four satellites and is wrong by a metre (measured on network-70km's start-up); with eight
+# there was no wrong fix. With fewer the epoch is a single-base VRS instead.
+MIN_CORRECTED_SATELLITES = 8
 # Time tags of different stations are the same epoch when they agree to this [s] (RINEX writes 0.1 us).
 EPOCH_MATCH_S = 1e-3
 # A baseline counts as fixed at an epoch when at least this share of its DD ambiguities is fixed.
@@ -247,6 +249,8 @@ def load_network(folder: str | os.PathLike, nav: str | os.PathLike | None = None
         name = station_name(p, data.header)
         marker = data.header.marker_name.strip()
         reason = skip_upper.get(name.upper()) or skip_upper.get(marker.upper())
+        if not reason and data.header.marker_type.strip().upper() == "NON_PHYSICAL":
+            reason = "a computed station (MARKER TYPE NON_PHYSICAL, e.g. an earlier VRS), not a reference station"
         if reason:
             excluded.append(f"{name}: {reason}")
             continue

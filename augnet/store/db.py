@@ -27,9 +27,18 @@ def normalise_url(url: str) -> str:
     return url
 
 
+# How long a SQLite connection waits for another's write lock before failing [ms]: the running system
+# writes from one thread while the console reads and writes from others.
+SQLITE_BUSY_TIMEOUT_MS = 5000
+
+
 def _sqlite_pragmas(dbapi_conn, _record) -> None:
     cur = dbapi_conn.cursor()
     cur.execute("PRAGMA foreign_keys=ON")
+    cur.execute(f"PRAGMA busy_timeout={SQLITE_BUSY_TIMEOUT_MS}")
+    # write-ahead log: readers (the console) never wait for the system's writes (a file database only)
+    if cur.execute("PRAGMA database_list").fetchone()[2]:
+        cur.execute("PRAGMA journal_mode=WAL")
     cur.close()
 
 

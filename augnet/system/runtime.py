@@ -545,7 +545,7 @@ def _pct(a: np.ndarray, q: float) -> float | None:
 def _model_names(r: EpochReport) -> dict[str, int]:
     if r.vrs is None:
         return {}
-    names = {0: "plane", 1: "along-line", 2: "distance", -1: "none"}
+    from augnet.centre.interpolation import MODEL_NAMES as names
     vals, counts = np.unique(r.vrs.model, return_counts=True)
     return {names.get(int(v), str(v)): int(c) for v, c in zip(vals, counts)}
 

@@ -147,8 +147,9 @@ pos1-elmask        =15
 pos1-navsys        =41
 pos1-ionoopt       =brdc
 pos1-tropopt       =saas
-pos2-armode        =continuous
+pos2-armode        =fix-and-hold
 pos2-arthres       =3
+pos2-arlockcnt     =20
 ant2-postype       =rtcm
 misc-timeinterp    =on
 """
