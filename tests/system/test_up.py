@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import socket
 import sqlite3
 import subprocess
@@ -77,7 +78,7 @@ def _finished(up_run) -> dict:
     return json.loads((up_run["work"] / "report.json").read_text())
 
 
-def test_console_url_printed_within_a_minute(up_run):
+def test_console_url_printed_within_a_minute(up_run, rtkrcv_live):  # rtkrcv starts riding now
     assert up_run["startup_s"] < 60.0
     assert up_run["state"]["console_url"] == f"http://127.0.0.1:{up_run['console_port']}/"
     log = (up_run["work"] / "up.log").read_text()
@@ -155,18 +156,18 @@ misc-timeinterp    =on
 """
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "not met yet (measured 2026-11-22 on demo): rtkrcv decodes both streams, uploads its GGA and holds an "
-    "RTK float on our VRS with 10-12 satellites (ratio 1.1-2.0, sd 6-11 cm) but does not fix within the "
-    "run; our onboard core fixes on the same VRS in 70-100 s. Same cause as the rnx2rtkp xfail in "
-    "tests/centre/test_vrs_rtklib.py: DD ionosphere interpolation error in the VRS (~3 cm at 35 km)"))
-def test_rtkrcv_rides_as_a_train_and_fixes_on_our_vrs(up_run):
-    rtkrcv, str2str = require_tool("rtkrcv"), require_tool("str2str")
+@pytest.fixture(scope="module")
+def rtkrcv_live(up_run):
+    """RTKLIB rtkrcv as a third train on G101's receiver, started as soon as the system is up."""
+    rtkrcv, str2str = shutil.which("rtkrcv"), shutil.which("str2str")
+    if not rtkrcv or not str2str:
+        yield None
+        return
     work, state = up_run["work"], up_run["state"]
     user, password, port = state["caster"]["user"], state["caster"]["password"], up_run["caster_port"]
     sol = work / "rtkrcv.pos"
     rover_port, base_port = _free_port(), _free_port()
-    relays = [
+    procs = [
         subprocess.Popen([str2str, "-in", f"ntrip://{user}:{password}@127.0.0.1:{port}/TRAIN-G101-RAW",
                           "-out", f"tcpsvr://:{rover_port}"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL),
         subprocess.Popen([str2str, "-in", f"ntrip://{user}:{password}@127.0.0.1:{port}/VRS",
@@ -177,32 +178,65 @@ def test_rtkrcv_rides_as_a_train_and_fixes_on_our_vrs(up_run):
     conf.write_text(RTKRCV_CONF.format(rover_port=rover_port, base_port=base_port, out=sol))
     console = _free_port()
     # its console on a TCP port (it crashes without a terminal otherwise); "start" begins processing
-    proc = subprocess.Popen([rtkrcv, "-p", str(console), "-w", "", "-o", str(conf)], cwd=work,
-                            stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    fixed, rows = 0, []
-    try:
-        time.sleep(1.5)
-        with socket.create_connection(("127.0.0.1", console), timeout=10) as con:
-            con.sendall(b"start\r\n")
-            time.sleep(0.5)
-        deadline = up_run["started"] + RUN_S - 5
-        while time.monotonic() < deadline:
-            time.sleep(5)
-            if sol.exists():
-                rows = [ln.split() for ln in sol.read_text().splitlines() if ln and not ln.startswith("%")]
-                fixed = sum(1 for r in rows if len(r) > 5 and r[5] == "1")
-                if fixed >= 10:
-                    break
-    finally:
-        for p in [proc, *relays]:
+    procs.append(subprocess.Popen([rtkrcv, "-p", str(console), "-w", "", "-o", str(conf)], cwd=work,
+                                  stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+    started = False
+    for _ in range(50):
+        try:
+            with socket.create_connection(("127.0.0.1", console), timeout=5) as con:
+                con.sendall(b"start\r\n")
+                time.sleep(0.5)
+            started = True
+            break
+        except OSError:
+            time.sleep(0.2)
+    live = {"sol": sol, "procs": procs, "started": started, "rows": None}
+    yield live
+    _stop(procs)
+
+
+def _stop(procs) -> None:
+    for p in procs:
+        if p.poll() is None:
             p.terminate()
             try:
                 p.wait(10)
             except subprocess.TimeoutExpired:
                 p.kill()
-    floats = sum(1 for r in rows if len(r) > 5 and r[5] == "2")
-    assert floats + fixed > 0, "rtkrcv computed no RTK solution from our streams"
-    assert fixed >= 10, f"rtkrcv: {fixed} fixed, {floats} float epochs; tail:\n{sol.read_text()[-800:]}"
+
+
+def _rtkrcv_rows(live, up_run) -> list[list[str]]:
+    """rtkrcv's solutions over the run (waits for the run's end the first time)."""
+    if live is None:
+        pytest.skip("RTKLIB rtkrcv / str2str not installed (make test installs rtklib)")
+    if live["rows"] is None:
+        time.sleep(max(0.0, up_run["started"] + RUN_S - 5 - time.monotonic()))
+        _stop(live["procs"])
+        text = live["sol"].read_text() if live["sol"].exists() else ""
+        live["rows"] = [ln.split() for ln in text.splitlines() if ln and not ln.startswith("%") and len(ln.split()) > 6]
+    return live["rows"]
+
+
+def test_rtkrcv_rides_as_a_train_on_our_streams(rtkrcv_live, up_run):
+    """rtkrcv decodes the train's raw stream and our VRS (obtained with its own GGA) into RTK solutions."""
+    assert rtkrcv_live is None or rtkrcv_live["started"], "rtkrcv's console never answered"
+    rows = _rtkrcv_rows(rtkrcv_live, up_run)
+    rtk = [r for r in rows if r[5] in ("1", "2")]  # Q: 1 fix, 2 float
+    assert len(rows) >= 60, f"rtkrcv wrote {len(rows)} solutions"
+    assert len(rtk) >= 0.5 * len(rows), f"only {len(rtk)} of {len(rows)} solutions are RTK"
+    assert max(int(r[6]) for r in rtk) >= 8  # satellites with both rover and VRS data
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
+    "not met yet (measured 2026-11-22 on demo, fix-and-hold, ratio 3, 20-epoch lock): rtkrcv holds an RTK "
+    "float on our VRS with 10-13 satellites (ratio 1.1-2.3, sd 2-11 cm), fixing for 0-2 epochs in a run; our "
+    "onboard core fixes on the same VRS in 70-100 s and rnx2rtkp fixes on our VRS RINEX (100 % with these "
+    "settings on network-70km). Live, rtkrcv pairs each rover epoch with the previous VRS epoch (age 1 s)."))
+def test_rtkrcv_fixes_on_our_vrs(rtkrcv_live, up_run):
+    q = [r[5] for r in _rtkrcv_rows(rtkrcv_live, up_run)]
+    first = q.index("1") if "1" in q else len(q)
+    after = q[first:]
+    assert after and after.count("1") >= 0.95 * len(after), f"{q.count('1')} fixed of {len(q)}"
 
 
 def test_both_trains_hold_a_fix_and_the_run_is_reported(up_run):
