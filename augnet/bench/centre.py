@@ -92,7 +92,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--epochs", type=int, default=30, help="epochs per network run")
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--quick", action="store_true", help="6 stations and 100 trains only")
-    args = ap.parse_args(argv or [])
+    args = ap.parse_args(argv)  # None: the command line (python -m augnet.bench.centre --quick)
     results: dict[str, object] = {}
     sizes = (6,) if args.quick else (6, 60)
     for n in sizes:

@@ -8,17 +8,23 @@ Per epoch (network-rtk.md, "the network engine"):
 2. Cycle slips per station and satellite: loss-of-lock flags, geometry-free phase jumps, gaps. A slip
    restarts that satellite's ambiguities (its ionosphere state carries on).
 3. A Kalman filter on the double differences (DD) of code and phase on both frequencies, ionosphere
-   weighted: states are the residual zenith wet delay of each station, and per satellite the
-   between-station single-difference (SD) slant ionosphere on f1 (a random walk with a prior scaled by the
-   baseline length: DD ionosphere is ~1-4 ppm of the baseline on a quiet day, network-rtk.md) and the SD
-   ambiguities on f1 and f2. This is the uncombined equivalent of Melbourne-Wuebbena wide-lane fixing
-   followed by ionosphere-free narrow-lane fixing, and it uses the ionosphere prior in addition, which is
-   what rejects the near-equivalent integer pairs (e.g. N1 + 7, Nw - 2 on GPS L1/L2) that the
-   ionosphere-free phase alone cannot tell apart.
-4. LAMBDA with partial fixing on the DD ambiguities (both frequencies), ratio test and bootstrapped
-   success rate; a DD ambiguity is fixed when the conditioned solution pins it to an integer and the same
-   integer has come out on several consecutive epochs; fixed ones are held as tight constraints (fix and
-   hold) and released when the phase residuals stop supporting them.
+   weighted: states are the residual zenith wet delay of each station (with a prior on their difference),
+   and per satellite the between-station single-difference (SD) slant ionosphere on f1 (a random walk with
+   a prior in ppm of the baseline length, vertical, mapped with the elevation: DD ionosphere is ~1-4 ppm
+   of the baseline on a quiet day, network-rtk.md), the SD ambiguities on f1 and f2, and the SD code and
+   phase multipath on f1 and f2 (first-order Gauss-Markov: static-station multipath is correlated over
+   minutes, and a white-noise model made the float covariance several times too optimistic). This is the
+   uncombined equivalent of Melbourne-Wuebbena wide-lane fixing followed by ionosphere-free narrow-lane
+   fixing, and it uses the ionosphere prior in addition, which is what rejects the near-equivalent integer
+   pairs (e.g. N1 + 7, Nw - 2 on GPS L1/L2; (3, 4) on Galileo E1/E5a) that the ionosphere-free phase alone
+   cannot tell apart.
+4. LAMBDA with partial fixing on the DD ambiguities (both frequencies, wide-lane pre-transform), ratio
+   test and bootstrapped success rate, the float solution conditioned on the network's ionosphere hints
+   (other baselines' fixed satellites, `network.py`) when there are any; a DD ambiguity is fixed when the
+   conditioned solution pins it to an integer and the same integer has come out on several consecutive
+   epochs (fewer when the success rate is very high); a wide lane pinned on its own is held while its
+   narrow lane is open; fixed ones are held as tight constraints (fix and hold), a new satellite is fixed
+   against the held ones, and fixed ones are released when the phase residuals stop supporting them.
 5. With the integers known, the DD phase residuals on f1 and f2 split into the dispersive part (DD slant
    ionosphere on f1) and the non-dispersive part (DD troposphere beyond the model plus orbit error): the
    corrections the network interpolates.
@@ -44,6 +50,9 @@ from augnet.gnss.ephemeris import NavigationData
 
 C = SPEED_OF_LIGHT_M_S
 FREQS = 2  # dual-frequency network processing
+# Per-satellite state block: SD ionosphere on f1 [m], SD ambiguities N1, N2 [cycles], then (when modelled) SD
+# code multipath on f1 and f2 [m] and SD phase multipath on f1 and f2 [m]; offsets within the block.
+_IONO, _N1 = 0, 1
 
 
 @dataclass(frozen=True)
@@ -51,19 +60,43 @@ class BaselineConfig:
     elevation_mask_deg: float = 10.0
     # Reference satellite: the highest one, kept while it stays above this elevation.
     ref_min_elevation_deg: float = 20.0
-    # Undifferenced noise sigma^2(el) = s^2 + s^2 / sin^2(el) (RTKLIB's a = b form) for phase and code.
-    phase_sigma_m: float = 0.003
-    # Code: the filter takes the noise as white, but station multipath is correlated over minutes; the
-    # code weight is lowered by this factor so the filter does not believe averaged code too soon.
-    code_sigma_m: float = 0.3
-    code_correlation_inflation: float = 1.5
+    # Undifferenced noise sigma^2(el) = s^2 + s^2 / sin^2(el) (RTKLIB's a = b form) for phase and code: s =
+    # sigma_zenith / sqrt(2), here 3 mm and 0.3 m at zenith, a geodetic station's figures (network-rtk.md).
+    phase_sigma_m: float = 0.0021
+    code_sigma_m: float = 0.21
+    code_correlation_inflation: float = 1.0  # scales the whole code sigma (white and multipath)
+    # Multipath: this share of the variance is not white but a first-order Gauss-Markov (AR(1)) process per
+    # station, satellite and signal with a correlation time of minutes (a static antenna). The filter
+    # carries it as states per satellite and frequency (the SD of the two stations'), for code and for
+    # phase, so that averaging buys what it really buys: a minute of code is still about one sample of its
+    # multipath, and the ionosphere-free phase (which amplifies phase multipath ~3x, to ~1 cm in a DD)
+    # does not separate the near-equivalent integer pairs (GPS (4, 5): 5 cm, BDS B1I/B3I (4, 5): 3.6 cm,
+    # Galileo E1/E5a (3, 4): 6 mm) within seconds. With white-noise weights the float covariance was
+    # several times too optimistic after a minute, the success rate meant little, and the ratio test let
+    # wrong integers through (Galileo (3, 4), a low BDS GEO (-4, -5)). Share 0 gives the white model.
+    code_multipath_share: float = 0.5
+    code_multipath_tau_s: float = 120.0
+    phase_multipath_share: float = 0.3
+    phase_multipath_tau_s: float = 120.0
     # Residual zenith wet delay: prior and random walk (a few mm to a cm per sqrt(hour)).
     zwd_prior_sigma_m: float = 0.10
+    # ... and of the difference between the two stations' (a few cm over tens of km: the wet field is
+    # smooth), which is what the DD troposphere depends on.
+    zwd_relative_prior_sigma_m: float = 0.03
     zwd_random_walk_m2_s: float = 2.0e-8
-    # SD slant ionosphere: prior and random walk, both in parts per million of the baseline length.
-    iono_prior_ppm: float = 5.0
-    iono_prior_min_m: float = 0.03
+    # SD ionosphere: prior and random walk in parts per million of the baseline length, vertical, mapped to
+    # slant with the single-layer mapping function at `iono_shell_height_km` (a satellite at 15 degrees sees
+    # ~2.5 times the zenith's difference); None: the same slant figure at every elevation. The prior is
+    # what separates the wide-lane candidates (one wide-lane cycle with the ionosphere-free phase kept is
+    # 0.57-0.8 m of DD ionosphere), so it must be the day's: a quiet mid-latitude day gives DD 1-4 ppm
+    # (network-rtk.md); the simulator's quiet day gives 0.9-1.5 ppm RMS per station pair in these units.
+    # The baseline raises it (never lowers it) to what its fixed satellites show (`iono_prior_adapt`).
+    iono_prior_ppm: float = 1.5
+    iono_prior_min_m: float = 0.01
     iono_rate_ppm_sqrt_s: float = 0.05
+    iono_shell_height_km: float | None = 350.0
+    iono_prior_adapt: float = 1.2  # prior >= this times the RMS seen on fixed satellites (0: off)
+    iono_prior_adapt_tau_s: float = 300.0
     # Initial SD ambiguity sigma [cycles]: set from code, so a few hundred cycles covers anything.
     amb_prior_sigma_cyc: float = 300.0
     # Satellites below this elevation stay float (their corrections are not produced): at 10-15 degrees the
@@ -74,7 +107,12 @@ class BaselineConfig:
     fix_ratio: float = 2.0
     fix_min_success_rate: float = 0.9999
     fix_min_count: int = 4
+    # With this many DD ambiguities already held, a new satellite's pair may be fixed on its own.
+    fix_min_count_held: int = 2
     fix_confirm_epochs: int = 5
+    # ... fewer when the fixed block's bootstrapped success rate is this high.
+    fix_confirm_epochs_sure: int = 2
+    fix_sure_success_rate: float = 0.999999
     # DD ambiguities still this uncertain [cycles] stay out of the integer search (they cannot be fixed
     # yet and only make the decorrelation slower).
     search_max_sigma_cyc: float = 5.0
@@ -85,6 +123,17 @@ class BaselineConfig:
     release_epochs: int = 3
     # An arc restarts after a gap longer than this [s].
     max_gap_s: float = 30.0
+    # Ionosphere hints from the network (NetworkSolver): a satellite fixed on other baselines gives, through a
+    # linear model of the DD ionosphere over the network (a gradient per satellite pair), a prediction for this
+    # baseline. Its error grows with the distance between the baselines' midpoints: this many ppm of the
+    # baseline length per 100 km of that distance, times the mapping sqrt(M_s^2 + M_ref^2); the simulator's
+    # quiet day shows 0.23 ppm RMS (0.6 max) at 50 km (0.45 ppm per 100 km), so 0.8 leaves room.
+    iono_hints: bool = True
+    # ... and, from baselines with no station in common, their float ionosphere where the satellite is not
+    # fixed there either (independent data: the two baselines' code together pin the ionosphere better)
+    iono_hints_float: bool = True
+    iono_hint_ppm_per_100km: float = 0.8
+    iono_hint_max_distance_km: float = 150.0
     # Time constant of the smoothing of DD residuals [s]: the DD ionosphere from the geometry-free phase
     # carries ~2x the phase noise (1-2 cm at low elevation) while the ionosphere itself changes by
     # millimetres per minute over a network baseline; 30 s removes most noise for a few mm of lag.
@@ -99,8 +148,8 @@ class _Track:
     gf_a: float = math.nan
     gf_b: float = math.nan
     epochs: int = 0
-    candidate: list = field(default_factory=lambda: [None, None])  # per frequency
-    streak: list = field(default_factory=lambda: [0, 0])
+    candidate: list = field(default_factory=lambda: [None, None, None])  # per table: N1, N2, wide lane
+    streak: list = field(default_factory=lambda: [0, 0, 0])
     bad_streak: int = 0
 
 
@@ -122,6 +171,9 @@ class BaselineEpoch:
     zwd_m: tuple[float, float] = (0.0, 0.0)
     ratio: float = 0.0
     eligible: np.ndarray | None = None  # (S,) bool: high enough to be fixed (fix_min_elevation_deg)
+    # (S,) the filter's DD ionosphere on f1 [m] against the reference and its variance [m^2], fixed or not
+    iono_float_m: np.ndarray | None = None
+    iono_float_var_m2: np.ndarray | None = None
 
     def is_reference(self) -> np.ndarray:
         return np.isin(self.sats, list(self.refs.values()))
@@ -146,18 +198,27 @@ class BaselineSolver:
         self.length_m = float(np.linalg.norm(self.xyz_b - self.xyz_a))
         self.cfg = config or BaselineConfig()
         cfg = self.cfg
-        self.iono_prior_var = max(cfg.iono_prior_min_m, cfg.iono_prior_ppm * 1e-6 * self.length_m) ** 2
+        self.iono_prior_var = (cfg.iono_prior_ppm * 1e-6 * self.length_m) ** 2
         self.iono_q = (cfg.iono_rate_ppm_sqrt_s * 1e-6 * self.length_m) ** 2
         self.tracks: dict[str, _Track] = {}
         self.refs: dict[str, str] = {}
-        self.fixed: list[dict[str, int]] = [{}, {}]  # per frequency: sat -> DD integer against refs[sys]
+        # sat -> DD integer against refs[sys]: N1, N2, and the wide lane N1 - N2 (held on its own while the
+        # narrow lane is still open)
+        self.fixed: list[dict[str, int]] = [{}, {}, {}]
         self.clock = {"a": 0.0, "b": 0.0}
         self.t_last = -math.inf
-        # Kalman filter: x = [zwd_a, zwd_b, (I, N1, N2) per satellite at self.index[sat]]
+        # Kalman filter: x = [zwd_a, zwd_b, (I, N1, N2, code M1, M2, phase M1, M2) per satellite at self.index[sat]]
+        self._mpc = 3 if cfg.code_multipath_share > 0 else None
+        self._mpp = (3 + 2 * (self._mpc is not None)) if cfg.phase_multipath_share > 0 else None
+        self._block = 3 + 2 * (self._mpc is not None) + 2 * (self._mpp is not None)
         self.x = np.zeros(2)
-        self.P = np.eye(2) * cfg.zwd_prior_sigma_m**2
+        # zwd_a = c - r/2, zwd_b = c + r/2 with c the common and r the relative residual wet delay
+        vc = max(cfg.zwd_prior_sigma_m**2 - cfg.zwd_relative_prior_sigma_m**2 / 4.0, 0.0)
+        vr = cfg.zwd_relative_prior_sigma_m**2
+        self.P = np.array([[vc + vr / 4.0, vc - vr / 4.0], [vc - vr / 4.0, vc + vr / 4.0]])
         self.index: dict[str, int] = {}
         self._smooth: dict[str, tuple] = {}  # sat -> (ref, integers, t, iono, trop)
+        self._iono_ms: float | None = None  # mean square of fixed satellites' DD ionosphere [ppm^2, vertical]
 
     @property
     def name(self) -> str:
@@ -165,13 +226,26 @@ class BaselineSolver:
 
     # --- state bookkeeping ---------------------------------------------------------------------
 
-    def _add_states(self, sat: str, iono_m: float, n1: float, n2: float) -> None:
+    def _iono_mapping(self, el_rad: np.ndarray) -> np.ndarray:
+        """Slant over vertical ionosphere (single layer), or ones without a shell height."""
+        if self.cfg.iono_shell_height_km is None:
+            return np.ones_like(el_rad)
+        r = 6371.0 / (6371.0 + self.cfg.iono_shell_height_km)
+        return 1.0 / np.sqrt(1.0 - (r * np.cos(el_rad)) ** 2)
+
+    def _add_states(self, sat: str, iono_m: float, n1: float, n2: float, mp_code_var_m2: float,
+                    mp_phase_var_m2: float, iono_var_scale: float = 1.0) -> None:
         n = len(self.x)
-        self.x = np.concatenate([self.x, [iono_m, n1, n2]])
-        P = np.zeros((n + 3, n + 3))
+        B = self._block
+        self.x = np.concatenate([self.x, [iono_m, n1, n2], np.zeros(B - 3)])
+        P = np.zeros((n + B, n + B))
         P[:n, :n] = self.P
-        P[n, n] = self.iono_prior_var
+        P[n, n] = max(self.iono_prior_var * iono_var_scale, self.cfg.iono_prior_min_m**2)
         P[n + 1, n + 1] = P[n + 2, n + 2] = self.cfg.amb_prior_sigma_cyc**2
+        if self._mpc is not None:
+            P[n + self._mpc, n + self._mpc] = P[n + self._mpc + 1, n + self._mpc + 1] = mp_code_var_m2
+        if self._mpp is not None:
+            P[n + self._mpp, n + self._mpp] = P[n + self._mpp + 1, n + self._mpp + 1] = mp_phase_var_m2
         self.P = P
         self.index[sat] = n
 
@@ -179,12 +253,12 @@ class BaselineSolver:
         drop = [self.index.pop(s) for s in sats if s in self.index]
         if not drop:
             return
-        gone = np.concatenate([np.arange(p, p + 3) for p in drop])
+        gone = np.concatenate([np.arange(p, p + self._block) for p in drop])
         keep = np.setdiff1d(np.arange(len(self.x)), gone)
         self.x = self.x[keep]
         self.P = self.P[np.ix_(keep, keep)]
         order = sorted(self.index.items(), key=lambda kv: kv[1])
-        self.index = {s: 2 + 3 * k for k, (s, _) in enumerate(order)}
+        self.index = {s: 2 + self._block * k for k, (s, _) in enumerate(order)}
 
     def _restart_ambiguities(self, sat: str, n1: float, n2: float) -> None:
         """A slip: the satellite's ambiguities start afresh (its ionosphere state carries on)."""
@@ -194,10 +268,10 @@ class BaselineSolver:
             self.P[:, q] = 0.0
             self.P[q, q] = self.cfg.amb_prior_sigma_cyc**2
             self.x[q] = val
-        for f in range(FREQS):
-            self.fixed[f].pop(sat, None)
+        for table in self.fixed:
+            table.pop(sat, None)
         tr = self.tracks[sat]
-        tr.candidate, tr.streak = [None, None], [0, 0]
+        tr.candidate, tr.streak = [None, None, None], [0, 0, 0]
 
     def _set_reference(self, system: str, new_ref: str) -> None:
         """Switch a system's reference satellite, carrying fixed DD integers over where possible."""
@@ -218,15 +292,19 @@ class BaselineSolver:
             table[old] = -offset
         for s, tr in self.tracks.items():
             if s[0] == system:
-                tr.candidate, tr.streak = [None, None], [0, 0]
+                tr.candidate, tr.streak = [None, None, None], [0, 0, 0]
 
     # --- one epoch -----------------------------------------------------------------------------
 
     def update(self, ep_a: StationEpoch, ep_b: StationEpoch, nav: NavigationData,
                geom_a: SatelliteGeometry | None = None, geom_b: SatelliteGeometry | None = None,
-               excluded: set[str] | frozenset[str] = frozenset()) -> BaselineEpoch | None:
+               excluded: set[str] | frozenset[str] = frozenset(),
+               iono_hints: dict[str, tuple[str, float, float]] | None = None) -> BaselineEpoch | None:
         """One epoch. `geom_a`/`geom_b`: the stations' geometry for all their satellites (the network
-        computes it once per station); `excluded`: satellites the integrity monitor has taken out."""
+        computes it once per station); `excluded`: satellites the integrity monitor has taken out;
+        `iono_hints`: sat -> (reference satellite, DD ionosphere on f1 [m], its variance [m^2]) predicted from
+        the other baselines' fixed satellites, used in the integer decision only (never in the filter state:
+        the same prediction epoch after epoch is not new information)."""
         cfg = self.cfg
         t = ep_a.t_gpst
         if abs(ep_b.t_gpst - t) > 1e-3:
@@ -261,21 +339,25 @@ class BaselineSolver:
         self._choose_references(sats, ga, gb, slipped, new_arc)
         # initial SD ambiguities from phase minus code (the ionosphere state starts at its zero-mean prior)
         n0 = (sd_phase - sd_code) / lam
+        shape = 2.0 + 1.0 / np.sin(ga.elevation_rad) ** 2 + 1.0 / np.sin(gb.elevation_rad) ** 2
+        mp_var = cfg.code_multipath_share * (cfg.code_sigma_m * cfg.code_correlation_inflation) ** 2 * shape
+        mpp_var = cfg.phase_multipath_share * cfg.phase_sigma_m**2 * shape
+        iono_scale = self._iono_mapping(np.minimum(ga.elevation_rad, gb.elevation_rad))
         for k, s in enumerate(sats):
             s = str(s)
             if s in new_arc or s not in self.index:
                 self._remove_states([s])
                 self.tracks[s] = _Track()
-                for fq in range(FREQS):
-                    self.fixed[fq].pop(s, None)
-                self._add_states(s, 0.0, n0[k, 0], n0[k, 1])
+                for table in self.fixed:
+                    table.pop(s, None)
+                self._add_states(s, 0.0, n0[k, 0], n0[k, 1], mp_var[k], mpp_var[k], iono_scale[k] ** 2)
             elif s in slipped:
                 self._restart_ambiguities(s, n0[k, 0], n0[k, 1])
         gone = [s for s in self.index if s not in set(sats.tolist())]
         self._remove_states(gone)
         for s in gone:
-            for fq in range(FREQS):
-                self.fixed[fq].pop(s, None)
+            for table in self.fixed:
+                table.pop(s, None)
         for k, s in enumerate(sats):
             tr = self.tracks[str(s)]
             tr.t_last = t
@@ -286,8 +368,24 @@ class BaselineSolver:
         self.t_last = t
         self.P[0, 0] += cfg.zwd_random_walk_m2_s * dt
         self.P[1, 1] += cfg.zwd_random_walk_m2_s * dt
-        for p in self.index.values():
-            self.P[p, p] += self.iono_q * dt
+        slots = np.array([self.index[str(s)] for s in sats])
+        self.P[slots, slots] += self.iono_q * iono_scale**2 * dt
+        if dt > 0 and (self._mpc is not None or self._mpp is not None):
+            # AR(1) multipath: x <- phi x, P <- F P F^T + (1 - phi^2) var(el)
+            f = np.ones(len(self.x))
+            innovation = []
+            for off, tau, var in ((self._mpc, cfg.code_multipath_tau_s, mp_var),
+                                  (self._mpp, cfg.phase_multipath_tau_s, mpp_var)):
+                if off is None:
+                    continue
+                phi = math.exp(-dt / tau)
+                mp = np.concatenate([slots + off, slots + off + 1])
+                self.x[mp] *= phi
+                f[mp] = phi
+                innovation.append((mp, (1.0 - phi**2) * np.concatenate([var, var])))
+            self.P *= f[:, None] * f[None, :]
+            for mp, q in innovation:
+                self.P[mp, mp] += q
 
         # measurement update with all DD code and phase
         ref_of = np.array([self.refs[s[0]] for s in sats])
@@ -296,12 +394,11 @@ class BaselineSolver:
         rows = np.array([k for k in range(len(sats)) if sats[k] != ref_of[k]], dtype=int)
         if rows.size == 0:
             return None
-        H, z, R = self._dd_model(sats, rows, ref_k, ga, gb, lam, gamma, sd_phase, sd_code)
-        self._kalman_update(H, z - H @ self.x, R)
+        self._kalman_update(*self._dd_model(sats, rows, ref_k, ga, gb, lam, gamma, sd_phase, sd_code))
         self._hold(sats, rows, ref_k)
         self._release(sats, rows, ref_k, ga, gb, lam, gamma, sd_phase)
         el_min = np.degrees(np.minimum(ga.elevation_rad, gb.elevation_rad))
-        ratio = self._fix(sats, rows[el_min[rows] >= cfg.fix_min_elevation_deg], ref_k)
+        ratio = self._fix(sats, rows[el_min[rows] >= cfg.fix_min_elevation_deg], ref_k, iono_hints)
 
         # DD residuals where the integers are known
         n = len(sats)
@@ -312,10 +409,13 @@ class BaselineSolver:
             elif s in self.fixed[0] and s in self.fixed[1]:
                 dd_n[k] = (self.fixed[0][s], self.fixed[1][s])
         fixed = np.isfinite(dd_n).all(axis=1)
+        ps = slots + _IONO
+        pr = slots[ref_k] + _IONO
         dd = sd_phase - sd_phase[ref_k]
         r = dd - lam * dd_n
         dd_iono = (r[:, 0] - r[:, 1]) / (gamma - 1.0)
         dd_trop = (gamma * r[:, 0] - r[:, 1]) / (gamma - 1.0)
+        self._learn_ionosphere(dt, fixed & (sats != ref_of), ref_k, iono_scale, dd_iono)
         dd_iono, dd_trop = self._smoothed(t, sats, ref_of, dd_n, fixed, dd_iono, dd_trop)
         return BaselineEpoch(
             t_gpst=t, refs=dict(self.refs), sats=sats.copy(),
@@ -323,9 +423,25 @@ class BaselineSolver:
             fixed=fixed, dd_n=dd_n, dd_iono_m=np.where(fixed, dd_iono, np.nan),
             dd_trop_m=np.where(fixed, dd_trop, np.nan), freq_hz=f.copy(), slips=sorted(slipped),
             zwd_m=(float(self.x[0]), float(self.x[1])), ratio=ratio,
-            eligible=el_min >= cfg.fix_min_elevation_deg)
+            eligible=el_min >= cfg.fix_min_elevation_deg, iono_float_m=self.x[ps] - self.x[pr],
+            iono_float_var_m2=self.P[ps, ps] + self.P[pr, pr] - 2.0 * self.P[ps, pr])
 
     # --- pieces of an epoch --------------------------------------------------------------------
+
+    def _learn_ionosphere(self, dt, fixed, ref_k, mapping, dd_iono) -> None:
+        """Running mean square of the fixed satellites' DD ionosphere in the prior's units; the prior for new
+        satellites is raised to `iono_prior_adapt` times its root (a storm day is not a quiet one)."""
+        cfg = self.cfg
+        if cfg.iono_prior_adapt <= 0 or not fixed.any():
+            return
+        q = dd_iono[fixed] / (1e-6 * self.length_m * np.hypot(mapping[fixed], mapping[ref_k[fixed]]))
+        ms = float(np.mean(q**2))
+        if self._iono_ms is None:
+            self._iono_ms = ms
+        else:
+            self._iono_ms += min(1.0, dt / cfg.iono_prior_adapt_tau_s) * (ms - self._iono_ms)
+        ppm = max(cfg.iono_prior_ppm, cfg.iono_prior_adapt * math.sqrt(self._iono_ms))
+        self.iono_prior_var = (ppm * 1e-6 * self.length_m) ** 2
 
     def _smoothed(self, t, sats, ref_of, dd_n, fixed, iono, trop):
         """Exponential smoothing of each satellite's DD residuals while its reference and integers stay."""
@@ -393,14 +509,14 @@ class BaselineSolver:
         """Design matrix, DD observations and their covariance for code and phase on both frequencies."""
         cfg = self.cfg
         m = rows.size
-        nx = len(self.x)
-        H = np.zeros((4 * m, nx))
         z = np.zeros(4 * m)
+        cols = np.zeros((4 * m, 8), dtype=int)  # the design matrix by rows: 8 (column, value) pairs each
+        vals = np.zeros((4 * m, 8))
         sin_a2 = np.sin(ga.elevation_rad) ** 2
         sin_b2 = np.sin(gb.elevation_rad) ** 2
         shape = 2.0 + 1.0 / sin_a2 + 1.0 / sin_b2  # SD variance / s^2
-        var_phase_sd = cfg.phase_sigma_m**2 * shape
-        var_code_sd = (cfg.code_sigma_m * cfg.code_correlation_inflation) ** 2 * shape
+        var_phase_sd = (1.0 - cfg.phase_multipath_share) * cfg.phase_sigma_m**2 * shape
+        var_code_sd = (1.0 - cfg.code_multipath_share) * (cfg.code_sigma_m * cfg.code_correlation_inflation) ** 2 * shape
         d_wet_a = ga.wet_mapping[rows] - ga.wet_mapping[ref_k[rows]]
         d_wet_b = gb.wet_mapping[rows] - gb.wet_mapping[ref_k[rows]]
         ps = np.array([self.index[str(sats[k])] for k in rows])
@@ -408,57 +524,74 @@ class BaselineSolver:
         g = gamma[rows]
         blocks = (  # (observation, ionosphere coefficient, ambiguity slot or None, frequency)
             ("P", 1.0, None, 0), ("P", g, None, 1), ("L", -1.0, 1, 0), ("L", -g, 2, 1))
-        Rs = []
+        R = np.zeros((4 * m, 4 * m))
         for i, (kind, icoef, slot, fq) in enumerate(blocks):
             sl = slice(i * m, (i + 1) * m)
-            rr = np.arange(i * m, (i + 1) * m)
-            H[rr, 0] = -d_wet_a
-            H[rr, 1] = d_wet_b
-            H[rr, ps] += icoef
-            H[rr, pr] -= icoef
+            entries = [(0, -d_wet_a), (1, d_wet_b), (ps + _IONO, icoef), (pr + _IONO, -icoef)]
             if slot is not None:
-                H[rr, ps + slot] += lam[rows, fq]
-                H[rr, pr + slot] -= lam[rows, fq]
+                entries += [(ps + slot, lam[rows, fq]), (pr + slot, -lam[rows, fq])]
+            mp_off = self._mpp if kind == "L" else self._mpc
+            if mp_off is not None:
+                entries += [(ps + mp_off + fq, 1.0), (pr + mp_off + fq, -1.0)]
+            for j, (c, v) in enumerate(entries):
+                cols[sl, j] = c
+                vals[sl, j] = v
             obs = sd_phase[:, fq] if kind == "L" else sd_code[:, fq]
             z[sl] = obs[rows] - obs[ref_k[rows]]
             var = var_phase_sd if kind == "L" else var_code_sd
             # DD covariance: each DD has its own SD variance plus its reference's, shared with the DDs of
             # the same reference.
-            Rb = np.diag(var[rows])
             same_ref = ref_k[rows][:, None] == ref_k[rows][None, :]
-            Rb = Rb + np.where(same_ref, var[ref_k[rows]][:, None], 0.0)
-            Rs.append(Rb)
-        R = np.zeros((4 * m, 4 * m))
-        for i, Rb in enumerate(Rs):
-            R[i * m:(i + 1) * m, i * m:(i + 1) * m] = Rb
-        return H, z, R
+            R[sl, sl] = np.diag(var[rows]) + np.where(same_ref, var[ref_k[rows]][:, None], 0.0)
+        return cols, vals, z, R
 
-    def _kalman_update(self, H: np.ndarray, innov: np.ndarray, R: np.ndarray) -> None:
-        PHt = self.P @ H.T
-        S = H @ PHt + R
-        try:
-            K = np.linalg.solve(S, PHt.T).T
+    def _kalman_update(self, cols: np.ndarray, vals: np.ndarray, z: np.ndarray, R: np.ndarray) -> None:
+        """Measurement update with a sparse design matrix given by rows: H[r, cols[r, j]] += vals[r, j]."""
+        P = self.P
+        HP = np.zeros((cols.shape[0], P.shape[0]))
+        for j in range(cols.shape[1]):
+            HP += vals[:, j, None] * P[cols[:, j]]
+        S = R.copy()
+        for j in range(cols.shape[1]):
+            S += HP[:, cols[:, j]] * vals[None, :, j]
+        innov = z - (vals * self.x[cols]).sum(axis=1)
+        try:  # S = L L^T: K = HP^T S^-1 and P - K HP = P - W^T W with W = L^-1 HP
+            Li = np.linalg.inv(np.linalg.cholesky(S))
         except np.linalg.LinAlgError:
             return
-        self.x = self.x + K @ innov
-        self.P = self.P - K @ PHt.T
-        self.P = 0.5 * (self.P + self.P.T)
+        W = Li @ HP
+        self.x = self.x + W.T @ (Li @ innov)
+        P = P - W.T @ W
+        self.P = 0.5 * (P + P.T)
 
-    def _dd_ambiguity_rows(self, sats, ks, ref_k, fq) -> np.ndarray:
-        D = np.zeros((len(ks), len(self.x)))
-        for i, k in enumerate(ks):
-            D[i, self.index[str(sats[k])] + 1 + fq] = 1.0
-            D[i, self.index[str(sats[ref_k[k]])] + 1 + fq] = -1.0
-        return D
+    def _dd_ambiguity_rows(self, sats, ks, ref_k, fq) -> tuple[np.ndarray, np.ndarray]:
+        """Rows picking DD ambiguities out of the state, as (columns, values): N1 (fq 0), N2 (fq 1) or the wide
+        lane N1 - N2 (fq 2)."""
+        ps = np.array([self.index[str(sats[k])] for k in ks], dtype=int)
+        pr = np.array([self.index[str(sats[ref_k[k]])] for k in ks], dtype=int)
+        one = np.ones(len(ks))
+        if fq < FREQS:
+            return np.column_stack([ps + _N1 + fq, pr + _N1 + fq, ps, ps]), np.column_stack([one, -one, 0 * one, 0 * one])
+        return (np.column_stack([ps + _N1, pr + _N1, ps + _N1 + 1, pr + _N1 + 1]),
+                np.column_stack([one, -one, -one, one]))
 
     def _hold(self, sats, rows, ref_k) -> None:
-        for fq in range(FREQS):
+        """Fixed DD integers as tight pseudo-observations (fix and hold); a wide lane held on its own where the
+        satellite's narrow lane is still open."""
+        cs, vs, zs = [], [], []
+        for fq in range(FREQS + 1):
             held = [k for k in rows if str(sats[k]) in self.fixed[fq]]
+            if fq == FREQS:
+                held = [k for k in held if not (str(sats[k]) in self.fixed[0] and str(sats[k]) in self.fixed[1])]
             if not held:
                 continue
-            D = self._dd_ambiguity_rows(sats, held, ref_k, fq)
-            zh = np.array([self.fixed[fq][str(sats[k])] for k in held], float)
-            self._kalman_update(D, zh - D @ self.x, np.eye(len(held)) * self.cfg.hold_sigma_cyc**2)
+            c, v = self._dd_ambiguity_rows(sats, held, ref_k, fq)
+            cs.append(c)
+            vs.append(v)
+            zs.append(np.array([self.fixed[fq][str(sats[k])] for k in held], float))
+        if cs:
+            zh = np.concatenate(zs)
+            self._kalman_update(np.vstack(cs), np.vstack(vs), zh, np.eye(len(zh)) * self.cfg.hold_sigma_cyc**2)
 
     def _release(self, sats, rows, ref_k, ga, gb, lam, gamma, sd_phase) -> None:
         """Post-fit DD phase residuals of fixed satellites; a wrong fix shows as a persistent residual."""
@@ -482,31 +615,66 @@ class BaselineSolver:
             if worst > cfg.release_residual_m:
                 tr.bad_streak += 1
                 if tr.bad_streak >= cfg.release_epochs:
-                    for fq in range(FREQS):
-                        self.fixed[fq].pop(s, None)
-                    tr.candidate, tr.streak, tr.bad_streak = [None, None], [0, 0], 0
+                    for table in self.fixed:
+                        table.pop(s, None)
+                    tr.candidate, tr.streak, tr.bad_streak = [None, None, None], [0, 0, 0], 0
             else:
                 tr.bad_streak = 0
 
-    def _fix(self, sats, rows, ref_k) -> float:
-        """LAMBDA with partial fixing over the DD ambiguities not yet fixed (both frequencies)."""
+    def _with_hints(self, sats, rows, ref_k, hints, D, a_hat, Q):
+        """The float ambiguities (a_hat, Q) conditioned on DD ionosphere pseudo-observations."""
+        hs = []
+        for k in rows:
+            s = str(sats[k])
+            h = hints.get(s)
+            if h is None or h[0] != str(sats[ref_k[k]]) or (s in self.fixed[0] and s in self.fixed[1]):
+                continue
+            hs.append((self.index[s] + _IONO, self.index[h[0]] + _IONO, h[1], h[2]))
+        if not hs:
+            return a_hat, Q
+        H = np.zeros((len(hs), len(self.x)))
+        H[np.arange(len(hs)), [h[0] for h in hs]] = 1.0
+        H[np.arange(len(hs)), [h[1] for h in hs]] = -1.0
+        z = np.array([h[2] for h in hs])
+        PHt = self.P @ H.T
+        S = H @ PHt + np.diag([h[3] for h in hs])
+        DPHt = D @ PHt
+        try:
+            G = np.linalg.solve(S, DPHt.T).T  # D P H^T S^-1
+        except np.linalg.LinAlgError:
+            return a_hat, Q
+        return a_hat + G @ (z - H @ self.x), Q - G @ DPHt.T
+
+    def _fix(self, sats, rows, ref_k, iono_hints=None) -> float:
+        """LAMBDA with partial fixing over the DD ambiguities not yet fixed (both frequencies), the float
+        solution conditioned on the network's ionosphere hints when there are any."""
         cfg = self.cfg
         cands = [(k, fq) for fq in range(FREQS) for k in rows if str(sats[k]) not in self.fixed[fq]]
-        D = np.zeros((len(cands), len(self.x)))
-        for i, (k, fq) in enumerate(cands):
-            D[i, self.index[str(sats[k])] + 1 + fq] = 1.0
-            D[i, self.index[str(sats[ref_k[k]])] + 1 + fq] = -1.0
-        ready = np.einsum("ij,jk,ik->i", D, self.P, D) <= cfg.search_max_sigma_cyc**2
+        # DD ambiguity = state[ia] - state[ib]: rows of D without building it
+        ia = np.array([self.index[str(sats[k])] + _N1 + fq for k, fq in cands], dtype=int)
+        ib = np.array([self.index[str(sats[ref_k[k]])] + _N1 + fq for k, fq in cands], dtype=int)
+        P = self.P
+        ready = P[ia, ia] + P[ib, ib] - 2.0 * P[ia, ib] <= cfg.search_max_sigma_cyc**2
         for i in np.flatnonzero(~ready):
             k, fq = cands[i]
             tr = self.tracks[str(sats[k])]
             tr.candidate[fq], tr.streak[fq] = None, 0
         cands = [c for c, r in zip(cands, ready) if r]
-        D = D[ready]
-        if len(cands) < cfg.fix_min_count:
+        ia, ib = ia[ready], ib[ready]
+        held = sum(len(self.fixed[fq]) for fq in range(FREQS))
+        min_count = cfg.fix_min_count if held < cfg.fix_min_count else min(cfg.fix_min_count, cfg.fix_min_count_held)
+        if len(cands) < min_count:
             return 0.0
-        a_hat = D @ self.x
-        Q = D @ self.P @ D.T
+        a_hat = self.x[ia] - self.x[ib]
+        DP = P[ia] - P[ib]
+        Q = DP[:, ia] - DP[:, ib]
+        D = None
+        if iono_hints:
+            D = np.zeros((len(cands), len(self.x)))
+            D[np.arange(len(cands)), ia] = 1.0
+            D[np.arange(len(cands)), ib] -= 1.0
+        if iono_hints:
+            a_hat, Q = self._with_hints(sats, rows, ref_k, iono_hints, D, a_hat, Q)
         # Wide-lane pre-transform: per satellite with both frequencies in the search, (N1, N2) -> (N1 - N2, N1),
         # an integer unimodular map. The wide lane is far better determined than N1 and N2, which are
         # ionosphere-limited; starting from it leaves LAMBDA's reduction a fraction of the permutations.
@@ -520,7 +688,7 @@ class BaselineSolver:
         b_hat = T @ a_hat
         Qb = T @ Q @ T.T
         try:
-            fix = partial_fix(b_hat, Qb, cfg.fix_min_success_rate, cfg.fix_ratio, cfg.fix_min_count)
+            fix = partial_fix(b_hat, Qb, cfg.fix_min_success_rate, cfg.fix_ratio, min_count)
         except AmbiguityError:
             fix = None
         pinned_val: dict[tuple[int, int], int] = {}
@@ -529,12 +697,26 @@ class BaselineSolver:
             S = Zs.T @ Q @ Zs
             K = np.linalg.solve(S, Zs.T @ Q).T
             a_cond = a_hat - K @ (Zs.T @ a_hat - fix.z_fixed)
-            sig = np.sqrt(np.clip(np.diag(Q - K @ Zs.T @ Q), 0.0, None))
+            Qc = Q - K @ Zs.T @ Q
+            sig = np.sqrt(np.clip(np.diag(Qc), 0.0, None))
             for i, kf in enumerate(cands):
                 val = int(round(a_cond[i]))
                 if sig[i] <= cfg.pinned_sigma_cyc and abs(a_cond[i] - val) < 3 * cfg.pinned_sigma_cyc:
                     pinned_val[kf] = val
-        for k, fq in cands:
+            # wide lanes pinned by the fix where the satellite's N1 and N2 are not (yet) pinned on their own
+            for i, (k, fq) in enumerate(cands):
+                j = where.get((k, 1))
+                if fq != 0 or j is None or str(sats[k]) in self.fixed[FREQS]:
+                    continue
+                w = a_cond[i] - a_cond[j]
+                sw = math.sqrt(max(Qc[i, i] + Qc[j, j] - 2 * Qc[i, j], 0.0))
+                val = int(round(w))
+                if sw <= cfg.pinned_sigma_cyc and abs(w - val) < 3 * cfg.pinned_sigma_cyc:
+                    pinned_val[(k, FREQS)] = val
+        wl = [(k, FREQS) for k, fq in cands if fq == 0 and (k, 1) in where and str(sats[k]) not in self.fixed[FREQS]]
+        sure = fix is not None and fix.success_rate >= cfg.fix_sure_success_rate
+        confirm = cfg.fix_confirm_epochs_sure if sure else cfg.fix_confirm_epochs
+        for k, fq in cands + wl:
             tr = self.tracks[str(sats[k])]
             val = pinned_val.get((k, fq))
             if val is None:
@@ -542,8 +724,12 @@ class BaselineSolver:
                 continue
             tr.streak[fq] = tr.streak[fq] + 1 if tr.candidate[fq] == val else 1
             tr.candidate[fq] = val
-            if tr.streak[fq] >= cfg.fix_confirm_epochs:
+            if tr.streak[fq] >= confirm:
                 self.fixed[fq][str(sats[k])] = val
+        for k, _ in wl:
+            s = str(sats[k])
+            if s in self.fixed[0] and s in self.fixed[1]:
+                self.fixed[FREQS][s] = self.fixed[0][s] - self.fixed[1][s]
         return fix.ratio if fix is not None else 0.0
 
 

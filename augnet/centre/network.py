@@ -8,13 +8,17 @@ connected). Each baseline resolves its own ambiguities (`baseline.py`); the netw
   triangle's baselines for that epoch);
 - chains baseline residuals along the shortest path from the master station to every station, after
   re-referencing them to one reference satellite per system, giving DD residuals (dispersive and
-  non-dispersive) of every station against the master: the input of the interpolation.
+  non-dispersive) of every station against the master: the input of the interpolation;
+- hands each baseline, for the next epoch, ionosphere hints for the satellites it has not fixed: the DD
+  ionosphere predicted from the other baselines where they are fixed (a linear model per satellite pair over
+  the network), which separates the wide-lane candidates (0.57-0.8 m of DD ionosphere apart) at once.
 """
 
 from __future__ import annotations
 
 import heapq
 import itertools
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -95,11 +99,21 @@ class NetworkSolver:
             idx_edges = sorted((min(pos[a], pos[b]), max(pos[a], pos[b])) for a, b in edges)
         self.edges = idx_edges
         self.triangles = triangles(idx_edges)
-        self.solvers = {(i, j): BaselineSolver(self.names[i], self.xyz[i], self.names[j], self.xyz[j], config)
+        self.cfg = config or BaselineConfig()
+        self.solvers = {(i, j): BaselineSolver(self.names[i], self.xyz[i], self.names[j], self.xyz[j], self.cfg)
                         for i, j in idx_edges}
         m = self.names.index(self.master)
         self.order = [m] + [i for i in range(len(self.names)) if i != m]
         self.en = ecef_to_enu(self.xyz - self.xyz[m], self.xyz[m])[:, :2]
+        # baseline vectors (b minus a, east/north) and, per baseline, the others near enough to lend it their
+        # ionosphere
+        self._dx = {e: self.en[e[1]] - self.en[e[0]] for e in idx_edges}
+        self._len = {e: float(np.linalg.norm(v)) for e, v in self._dx.items()}
+        mid = {e: 0.5 * (self.en[e[0]] + self.en[e[1]]) for e in idx_edges}
+        far = self.cfg.iono_hint_max_distance_km * 1e3
+        self._near = {t: [(e, float(np.linalg.norm(mid[e] - mid[t]))) for e in idx_edges
+                          if e != t and np.linalg.norm(mid[e] - mid[t]) <= far] for t in idx_edges}
+        self._hints: dict[tuple[int, int], dict] = {}
         self.clocks = {n: 0.0 for n in self.names}
         self.integrity = IntegrityMonitor(self.names)
 
@@ -121,10 +135,12 @@ class NetworkSolver:
         for (i, j), solver in self.solvers.items():
             a, b = self.names[i], self.names[j]
             if a in present and b in present:
-                results[(i, j)] = solver.update(epochs[a], epochs[b], nav, geom[a], geom[b], excluded)
+                results[(i, j)] = solver.update(epochs[a], epochs[b], nav, geom[a], geom[b], excluded,
+                                                self._hints.get((i, j)))
             else:
                 results[(i, j)] = None
         misclosures = self._check_closures(results)
+        self._hints = self._iono_hints(results)
         refs = self._network_refs(results)
         sats = np.array(sorted({str(s) for r in results.values() if r is not None for s in r.sats}))
         n = len(self.names)
@@ -163,6 +179,80 @@ class NetworkSolver:
             baselines={self.solvers[e].name: r for e, r in results.items()}, misclosures=misclosures,
             present=sorted(present), clocks=dict(self.clocks), excluded=set(excluded),
             alarms=self.integrity.drain())
+
+    def _iono_hints(self, results) -> dict[tuple[int, int], dict[str, tuple[str, float, float]]]:
+        """For each baseline and satellite not fixed there: the DD ionosphere (against the baseline's reference)
+        predicted from the other baselines where both are fixed, with a linear model per satellite pair (DD
+        ionosphere = gradient . baseline vector; the gradient fitted by weighted least squares, each source
+        weighted by the model error at its distance). A satellite fixed on one baseline thus helps the parallel
+        ones at once, and two non-parallel ones help every baseline around them. Used for the next epoch."""
+        cfg = self.cfg
+        if not cfg.iono_hints:
+            return {}
+        shell = cfg.iono_shell_height_km or 350.0
+        rr = 6371.0 / (6371.0 + shell)
+        info = {e: (r, {str(s): k for k, s in enumerate(r.sats)}) for e, r in results.items() if r is not None}
+        hints: dict[tuple[int, int], dict[str, tuple[str, float, float]]] = {}
+        for t, (rt, post) in info.items():
+            need = ~rt.fixed & (rt.eligible if rt.eligible is not None else True)
+            if not need.any():
+                continue
+            dxt = self._dx[t]
+            lt = self._len[t]
+            el = np.radians(np.minimum(rt.elevation_a_deg, rt.elevation_b_deg))
+            mapping = 1.0 / np.sqrt(1.0 - (rr * np.cos(el)) ** 2)
+            out = {}
+            for k in np.flatnonzero(need):
+                s = str(rt.sats[k])
+                ref = rt.refs.get(s[0])
+                kr = post.get(ref)
+                if kr is None or s == ref:
+                    continue
+                meff = math.hypot(mapping[k], mapping[kr])
+                lam = np.eye(2) / (10.0 * cfg.iono_prior_ppm * 1e-6 * meff) ** 2  # weak prior on the gradient
+                vec = np.zeros(2)
+                used = 0
+                for e, dist in self._near[t]:
+                    src = info.get(e)
+                    if src is None:
+                        continue
+                    re, pe = src
+                    ks, kq = pe.get(s), pe.get(ref)
+                    if ks is None or kq is None:
+                        continue
+                    dxe = self._dx[e]
+                    var = (cfg.iono_hint_ppm_per_100km * 1e-6 * max(dist, 0.5 * lt) / 1e5 * self._len[e] * meff) ** 2
+                    if re.fixed[ks] and re.fixed[kq]:
+                        y = re.dd_iono_m[ks] - re.dd_iono_m[kq]
+                    elif (cfg.iono_hints_float and re.iono_float_m is not None and re.refs.get(s[0]) == ref
+                          and not set(e) & set(t)):
+                        # not fixed there either: the float estimate of a baseline with no station in common
+                        # (independent multipath and noise), less its prior (which this baseline has too): in
+                        # information form, data = posterior - prior
+                        vp = (cfg.iono_prior_ppm * 1e-6 * self._len[e] * meff) ** 2
+                        v = float(re.iono_float_var_m2[ks])
+                        if not v < 0.8 * vp:
+                            continue
+                        y = float(re.iono_float_m[ks]) * vp / (vp - v)
+                        var += v * vp / (vp - v)
+                    else:
+                        continue
+                    if not np.isfinite(y):
+                        continue
+                    lam += np.outer(dxe, dxe) / var
+                    vec += dxe * y / var
+                    used += 1
+                if not used:
+                    continue
+                cov = np.linalg.inv(lam)
+                var = float(dxt @ cov @ dxt)
+                # only where it says more than the baseline's own prior
+                prior_dd = cfg.iono_prior_ppm * 1e-6 * lt * meff
+                if var < prior_dd**2:
+                    out[s] = (ref, float(dxt @ cov @ vec), var)
+            if out:
+                hints[t] = out
+        return hints
 
     def _network_refs(self, results) -> dict[str, str]:
         """Per system, the satellite fixed on the most baselines (ties: the first baseline's reference)."""

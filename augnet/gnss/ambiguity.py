@@ -304,9 +304,12 @@ def partial_fix(
     L, D = ldl(Q)
     L, D, Z = reduce(L, D)
     zs = Z.T @ a_hat
+    # bootstrapped success rate of every trailing block at once: products of the per-ambiguity factors
+    factors = np.array([2.0 * _phi(1.0 / (2.0 * sqrt(d))) - 1.0 for d in D])
+    trailing = np.cumprod(factors[::-1])[::-1]
     for start in range(0, n - min_count + 1):
         Dsub = D[start:]
-        p = bootstrap_success_rate(Dsub)
+        p = float(trailing[start])
         if p < min_success_rate:
             continue
         cand, norms = search(L[start:, start:], Dsub, zs[start:], 2)

