@@ -251,9 +251,23 @@ async def run_stations(sc: Scenario, host: str, port: int, *, user: str = "", pa
     if not on_gps_clock:
         gps0 = world.t0
     carry: collections.defaultdict[str, bytearray] = collections.defaultdict(bytearray)
+    # The world simulates the next block (and encodes its RTCM) in a worker thread while the current
+    # block's epochs leave: the event loop, which may also carry a caster and a centre, never waits for it.
+    blocks = world.epochs(LIVE_BLOCK_EPOCHS)
+
+    def produce():
+        nxt = next(blocks, None)
+        if nxt is not None:
+            streams.add(nxt)
+        return nxt
+
+    pending_block = loop.run_in_executor(None, produce)
     try:
-        for blk in world.epochs(LIVE_BLOCK_EPOCHS):
-            streams.add(blk)
+        while True:
+            blk = await pending_block
+            if blk is None:
+                break
+            pending_block = loop.run_in_executor(None, produce)
             if on_block is not None:
                 on_block(blk)
             for e, t in enumerate(blk.t_gpst):

@@ -15,8 +15,9 @@ BENCHMARKS = {
     "caster": ("augnet.bench.caster", "NTRIP caster under load (see also `augnet loadtest`)."),
     "rtk": ("augnet.bench.rtk", "Onboard RTK: time per epoch against RTKLIB rnx2rtkp."),
     "centre": ("augnet.bench.centre", "Network solution per epoch and VRS synthesis + encoding for many trains."),
+    "up": ("augnet.bench.up", "The whole system: console p99 and 2,000 trains' correction age while augnet up demo runs."),
 }
-# `augnet bench all` (and `make run` until `augnet up` lands) runs these: the ones that finish in a minute.
+# `augnet bench all` runs these: the ones that finish in a minute.
 QUICK = ("rtcm", "rssp1", "sim")
 
 app = typer.Typer(no_args_is_help=True, help="Benchmarks against named peers.")
