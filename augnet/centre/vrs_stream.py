@@ -50,6 +50,7 @@ class Client:
     last_arp: float = -np.inf
     last_eph: float = -np.inf
     moved: bool = True
+    station_frames: bytes = b""  # framed 1006 + 1033, encoded when the point is set (resent from here)
 
 
 class VrsStreamEncoder:
@@ -155,18 +156,27 @@ class VrsStreamEncoder:
             if c.master and c.master != vrs.master[i]:
                 self._lock_t0[c.row] = np.nan  # new master, new ambiguities: every lock restarts
             c.master = vrs.master[i]
+            if c.moved or not c.station_frames:
+                # encoded once per position (a few hundred microseconds): re-encoding 2,000 clients' station
+                # messages every STATION_INTERVAL_S was a half-second stall
+                c.station_frames = (
+                    encode_frame(arp_message(c.station_id, c.point, antenna_height_m=0.0, non_physical=True))
+                    + encode_frame(descriptor_message(c.station_id, f"VRS{c.station_id}", VRS_ANTENNA,
+                                                      VRS_RECEIVER, FIRMWARE)))
             if c.moved or t - c.last_arp >= STATION_INTERVAL_S:
-                out[cid] += encode_frame(arp_message(c.station_id, c.point, antenna_height_m=0.0, non_physical=True))
-                out[cid] += encode_frame(descriptor_message(c.station_id, f"VRS{c.station_id}", VRS_ANTENNA,
-                                                            VRS_RECEIVER, FIRMWARE))
+                out[cid] += c.station_frames
                 c.last_arp = t
                 c.moved = False
             if periodic[i]:
                 c.last_eph = t
-        for i, k in zip(*np.nonzero(due)):
-            frame = self._eph_frame(int(eph_rows[k]), nav)
-            if frame:
-                out[ids[i]] += frame
+        # clients due the same ephemerides (those of one master, at the periodic resend) share one blob
+        blobs: dict[bytes, bytes] = {}
+        for i in np.flatnonzero(due.any(axis=1)):
+            key = np.packbits(due[i]).tobytes()
+            blob = blobs.get(key)
+            if blob is None:
+                blob = blobs[key] = b"".join(self._eph_frame(int(eph_rows[k]), nav) for k in np.flatnonzero(due[i]))
+            out[ids[i]] += blob
         # MSM per system, batched over clients
         systems = [s for s in SYSTEM_ORDER if any(str(x).startswith(s) for x in vrs.sats)]
         batches = []
