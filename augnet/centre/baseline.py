@@ -117,7 +117,7 @@ class BaselineConfig:
     # yet and only make the decorrelation slower).
     search_max_sigma_cyc: float = 5.0
     pinned_sigma_cyc: float = 0.05  # conditioned DD ambiguity sigma at which it counts as pinned
-    hold_sigma_cyc: float = 0.005
+    hold_sigma_cyc: float = 0.001  # applied once per newly fixed ambiguity (they have no process noise)
     # A fixed DD whose post-fit phase residual stays above this for `release_epochs` is released.
     release_residual_m: float = 0.04
     release_epochs: int = 3
@@ -396,7 +396,7 @@ class BaselineSolver:
             return None
         self._kalman_update(*self._dd_model(sats, rows, ref_k, ga, gb, lam, gamma, sd_phase, sd_code))
         self._hold(sats, rows, ref_k)
-        self._release(sats, rows, ref_k, ga, gb, lam, gamma, sd_phase)
+        self._release(sats, rows, ref_k, ga, gb, lam, gamma, sd_phase, sd_code)
         el_min = np.degrees(np.minimum(ga.elevation_rad, gb.elevation_rad))
         ratio = self._fix(sats, rows[el_min[rows] >= cfg.fix_min_elevation_deg], ref_k, iono_hints)
 
@@ -589,12 +589,23 @@ class BaselineSolver:
             cs.append(c)
             vs.append(v)
             zs.append(np.array([self.fixed[fq][str(sats[k])] for k in held], float))
-        if cs:
-            zh = np.concatenate(zs)
-            self._kalman_update(np.vstack(cs), np.vstack(vs), zh, np.eye(len(zh)) * self.cfg.hold_sigma_cyc**2)
+        if not cs:
+            return
+        cols, vals, zh = np.vstack(cs), np.vstack(vs), np.concatenate(zs)
+        # Ambiguities have no process noise: a held one stays held after one update; apply the constraint
+        # where it is new (or its state was reset), not again every epoch.
+        P = self.P
+        var = np.zeros(len(zh))
+        for i in range(cols.shape[1]):
+            for j in range(cols.shape[1]):
+                var += vals[:, i] * vals[:, j] * P[cols[:, i], cols[:, j]]
+        new = var > 2.0 * self.cfg.hold_sigma_cyc**2
+        if new.any():
+            self._kalman_update(cols[new], vals[new], zh[new], np.eye(int(new.sum())) * self.cfg.hold_sigma_cyc**2)
 
-    def _release(self, sats, rows, ref_k, ga, gb, lam, gamma, sd_phase) -> None:
-        """Post-fit DD phase residuals of fixed satellites; a wrong fix shows as a persistent residual."""
+    def _release(self, sats, rows, ref_k, ga, gb, lam, gamma, sd_phase, sd_code) -> None:
+        """Post-fit DD phase residuals of fixed satellites; a wrong fix shows as a persistent residual. A released
+        satellite's ambiguities start afresh (the hold has pinned their states to the integers let go)."""
         cfg = self.cfg
         for k in rows:
             s = str(sats[k])
@@ -615,9 +626,9 @@ class BaselineSolver:
             if worst > cfg.release_residual_m:
                 tr.bad_streak += 1
                 if tr.bad_streak >= cfg.release_epochs:
-                    for table in self.fixed:
-                        table.pop(s, None)
-                    tr.candidate, tr.streak, tr.bad_streak = [None, None, None], [0, 0, 0], 0
+                    n0 = (sd_phase[k] - sd_code[k]) / lam[k]
+                    self._restart_ambiguities(s, n0[0], n0[1])
+                    tr.bad_streak = 0
             else:
                 tr.bad_streak = 0
 
