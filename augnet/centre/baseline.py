@@ -372,7 +372,7 @@ class BaselineSolver:
         self.P[slots, slots] += self.iono_q * iono_scale**2 * dt
         if dt > 0 and (self._mpc is not None or self._mpp is not None):
             # AR(1) multipath: x <- phi x, P <- F P F^T + (1 - phi^2) var(el)
-            f = np.ones(len(self.x))
+            decay = np.ones(len(self.x))  # not `f`: that name holds the frequencies
             innovation = []
             for off, tau, var in ((self._mpc, cfg.code_multipath_tau_s, mp_var),
                                   (self._mpp, cfg.phase_multipath_tau_s, mpp_var)):
@@ -381,9 +381,9 @@ class BaselineSolver:
                 phi = math.exp(-dt / tau)
                 mp = np.concatenate([slots + off, slots + off + 1])
                 self.x[mp] *= phi
-                f[mp] = phi
+                decay[mp] = phi
                 innovation.append((mp, (1.0 - phi**2) * np.concatenate([var, var])))
-            self.P *= f[:, None] * f[None, :]
+            self.P *= decay[:, None] * decay[None, :]
             for mp, q in innovation:
                 self.P[mp, mp] += q
 
