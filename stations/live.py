@@ -37,7 +37,8 @@ RESPONSE_TIMEOUT_S = 10.0
 QUEUE_EPOCHS = 5  # at most this many epochs wait for a slow link; older ones are dropped
 LIVE_BLOCK_EPOCHS = 5  # simulate a few epochs ahead of the wall clock
 MSM_FIRST_TYPE, MSM_LAST_TYPE = 1071, 1137  # RTCM 10403.3: MSM1-7 of GPS ... BeiDou
-LATE_EPOCH_S = 1.0  # live: an epoch this far behind its GPS time is dropped, not sent late
+LATE_EPOCH_S = 1.0
+MAX_STANDING_BYTES = 64 * 1024  # ~100 ephemeris messages: all of three constellations, twice  # live: an epoch this far behind its GPS time is dropped, not sent late
 
 
 class SourceRefused(Exception):
@@ -75,16 +76,27 @@ class SourceConnection:
         self._chunked = False
         self._rng = random.Random(rng_seed)
         self.connected = asyncio.Event()
+        self._standing = bytearray()  # station and ephemeris frames of dropped epochs, for the next one
 
     def offer(self, data: bytes) -> None:
-        """Hand over one epoch's bytes; dropped when not connected or the link is backed up."""
+        """Hand over one epoch's bytes; dropped when not connected or the link is backed up. A dropped
+        epoch's station and ephemeris messages (which do not age) leave with the next epoch that goes: a
+        caster that connected late must not wait for the periodic resend to learn the orbits."""
         if not data:
             return
         if not self.connected.is_set():
             self.stats.epochs_dropped += 1
+            standing = non_observation_frames(data)
+            if standing:
+                if len(self._standing) + len(standing) > MAX_STANDING_BYTES:
+                    self._standing.clear()  # a long outage: the newest set is the one that matters
+                self._standing += standing
             return
+        if self._standing:
+            data = bytes(self._standing) + data
+            self._standing.clear()
         if self.queue.full():
-            self.queue.get_nowait()
+            data = non_observation_frames(self.queue.get_nowait()) + data
             self.stats.epochs_dropped += 1
         self.queue.put_nowait(data)
 

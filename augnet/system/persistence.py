@@ -56,6 +56,7 @@ def register_station(s: Session, code: str, name: str, xyz_m, rtcm_id: int, moun
     st = s.scalar(select(Station).where(Station.code == code))
     if st is None:
         st = queries.add_station(s, SYSTEM_ACTOR, code, tuple(float(v) for v in xyz_m), rtcm_id, mountpoint, name)
+        s.flush()  # the column default (enabled) is applied at the INSERT: before it, st.enabled is None
     return bool(st.enabled)
 
 

@@ -51,3 +51,21 @@ def test_line_sections_follow_the_stations_that_bracket_them():
     assert set(float_net.values()) == {SectionStatus.DEGRADED}
     assert set(plan.statuses(set(), set()).values()) == {SectionStatus.DO_NOT_USE}
     assert fixed_stations({"A-B": 0.9, "B-C": 0.2}) == {"A", "B"}
+
+
+def test_a_new_station_is_registered_enabled_and_an_operators_decision_stands(tmp_path):
+    """A fresh store once reported every new station disabled (the column default is applied at the
+    INSERT), so `augnet up` ignored all station data for its first seconds and lost the orbits."""
+    from augnet.store.db import open_store
+    from augnet.system import persistence
+    from augnet.store import queries
+
+    sessions = open_store(f"sqlite:///{tmp_path / 'augnet.db'}")
+    xyz = (-2.2e6, 4.4e6, 4.0e6)
+    with sessions.begin() as s:
+        assert persistence.register_station(s, "STA1", "STA1", xyz, 101, "STA1") is True
+    with sessions.begin() as s:
+        queries.update_station(s, "op", "STA1", enabled=False)
+    with sessions.begin() as s:
+        assert persistence.register_station(s, "STA1", "STA1", xyz, 101, "STA1") is False
+        assert persistence.station_enabled_map(s) == {"STA1": False}
