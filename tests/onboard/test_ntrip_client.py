@@ -234,4 +234,4 @@ def test_unreachable_caster_backs_off_exponentially():
     delays = [float(e.split()[2]) for e in client.stats.events if e.startswith("reconnect in")]
     assert len(delays) >= 4
     assert delays[3] > 2.0 * delays[0]  # doubling (with +-20 % jitter)
-    assert max(delays) <= 0.08 * 1.2 + 1e-9
+    assert max(delays) <= 0.08 * 1.2 + 0.005  # the log prints the delay to 10 ms (0.096 reads "0.10")
