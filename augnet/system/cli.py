@@ -33,8 +33,6 @@ def up(
                                        help="Console admin password (first run; default: random, printed)."),
 ) -> None:
     """Stations, caster, centre, RSSP-I link, trains and console in one asyncio process."""
-    from augnet.system.runtime import System
-
     settings = SystemSettings(scenario=scenario, trains=trains, duration_s=duration, db_url=db, host=host,
                               caster_port=caster_port, console_port=console_port, bus_url=bus, rbc=rbc,
                               view=view, report_path=report, state_path=state, admin_password=admin_password)
@@ -98,7 +96,7 @@ async def _log_lines(system, every_s: float = 10.0) -> None:
     while not system.stop_event.is_set():
         await asyncio.sleep(every_s)
         r = system.last_report
-        trains = " ".join(f"{tid}:{({1: 'fix', 2: 'float', 5: 'single'}.get(int(t.last.solution.status), 'none') if t.last else '-')}"
+        trains = " ".join(f"{tid}:{(t.last.solution.status_name if t.last else '-')}"
                           for tid, t in sorted(system.trains.items()))
         fixed = r.network.fixed_fraction() if r else {}
         print(f"[{system.settings.scenario}] epochs {system.centre.timings.epochs} stations "

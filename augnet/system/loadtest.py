@@ -28,7 +28,7 @@ import typer
 
 from augnet.gnss import time as gtime
 from ntrip_caster.gga import format_gga
-from ntrip_caster.loadtest import ClientSpec, LoadClient, _percentiles, client_request
+from ntrip_caster.loadtest import ClientSpec, LoadClient, _percentiles
 
 CONNECT_CONCURRENCY = 128
 GGA_INTERVAL_S = 5.0  # trains report their position every few seconds (ntrip.md: VRS casters expect 1-10 s)

@@ -14,6 +14,7 @@ end of a loopback UDP link shows what a real RBC would believe.
 
 from __future__ import annotations
 
+import asyncio
 import math
 
 import numpy as np
@@ -89,8 +90,6 @@ class RbcConnection:
         self.tasks: list = []
 
     async def start(self, host: str = "127.0.0.1") -> None:
-        import asyncio
-
         rbc_link = await UdpLink.open(self.rbc, LINK_TIMING.cycle_s, (host, 0), (host, 9))
         centre_link = await UdpLink.open(self.centre, LINK_TIMING.cycle_s, (host, 0), rbc_link.local_address)
         rbc_link.remote = centre_link.local_address
@@ -120,8 +119,6 @@ class RbcConnection:
                 "last_rbc_alarm": (self.rbc.alarms[-1].code.name if self.rbc.alarms else None)}
 
     async def stop(self) -> None:
-        import asyncio
-
         for link in self.links:
             r = link.close()
             if asyncio.iscoroutine(r):

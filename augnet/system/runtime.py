@@ -347,8 +347,7 @@ class System:
             for key, b in ne.baselines.items():
                 if b is None:
                     continue
-                rms = float(np.sqrt(np.nanmean(b.dd_trop_m[b.fixed] ** 2))) if b.fixed.any() else None
-                rows.append((key, float(b.fixed_fraction), rms, int(len(b.sats))))
+                rows.append((key, float(b.fixed_fraction), _fixed_residual_rms_m(b), int(len(b.sats))))
             self.writer.submit(lambda db: persistence.record_quality_batch(db, at, rows))
 
     def _alarm(self, kind: str, subject: str, severity: str, message: str, cleared: bool) -> None:
@@ -392,8 +391,8 @@ class System:
                 continue
             frac = float(b.fixed_fraction)
             state = "fixed" if frac >= 0.5 else "float"
-            rms = float(np.sqrt(np.nanmean(b.dd_trop_m[b.fixed] ** 2)) * 100.0) if b.fixed.any() else None
-            baselines.append(BaselineLive(a, c, length, state, round(frac, 3), None if rms is None else round(rms, 2)))
+            rms = _fixed_residual_rms_m(b)
+            baselines.append(BaselineLive(a, c, length, state, round(frac, 3), None if rms is None else round(rms * 100.0, 2)))
         self.live.set_baselines(baselines)
         ages = np.array(self.correction_age_s[-300:]) if self.correction_age_s else np.array([np.nan])
         self.live.set_network({
@@ -429,7 +428,7 @@ class System:
             id=train.id, lat_deg=float(np.degrees(llh[0])), lon_deg=float(np.degrees(llh[1])), h_m=float(llh[2]),
             track_id=m.track if m is not None else None, along_km=(round(m.km, 4) if m is not None and m.track else None),
             cross_track_m=(round(m.cross_m, 3) if m is not None and m.track else None),
-            fix_state={1: "fix", 2: "float", 5: "single"}.get(int(sol.status), "none"),
+            fix_state=sol.status_name,
             correction_age_s=train.correction_age_s(), hpl_m=hpl, vpl_m=vpl, speed_kmh=speed, updated_unix=now))
 
     # --- station changes from the console -----------------------------------------------------------------
@@ -502,7 +501,6 @@ class System:
             self.writer.close()
 
     def summary(self) -> RunSummary:
-        sc = self.world.scenario if self.world else None
         out = RunSummary(scenario=self.settings.scenario,
                          started_utc=dt.datetime.fromtimestamp(self.started, dt.timezone.utc).isoformat(),
                          duration_s=round(time.time() - self.started, 1),
@@ -533,8 +531,12 @@ class System:
                                      for k, v in snap["mounts"].items()}}
         if self.writer is not None:
             out.store = {"writes": self.writer.writes, "failures": self.writer.failures}
-        _ = sc
         return out
+
+
+def _fixed_residual_rms_m(b) -> float | None:
+    """RMS of a baseline's non-dispersive DD residuals over its fixed satellites [m] (None when none fixed)."""
+    return float(np.sqrt(np.nanmean(b.dd_trop_m[b.fixed] ** 2))) if b.fixed.any() else None
 
 
 def _pct(a: np.ndarray, q: float) -> float | None:

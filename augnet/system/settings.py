@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 DEFAULT_DB_URL = "sqlite:///augnet.db"
@@ -38,7 +38,6 @@ class SystemSettings:
     report_path: Path | None = None
     state_path: Path | None = Path("augnet-up.json")  # where tools find the URLs and credentials
     admin_password: str = ""  # "" -> a random one, printed once
-    extra: dict = field(default_factory=dict)
 
     def validate(self) -> "SystemSettings":
         if self.trains is not None and not 0 <= self.trains <= MAX_LIVE_TRAINS:

@@ -37,7 +37,6 @@ from augnet.onboard.unit import OnboardUnit, UnitOutput
 MAX_BASE_WAIT_S = 1.5  # a rover epoch waits this long for its own VRS epoch before using the latest
 MAX_QUEUED_ROVER_EPOCHS = 10
 GGA_INTERVAL_S = 2.0  # the caster re-evaluates a VRS point at most every 10 s (reposition policy)
-FIX_STATE = {Status.FIX: "fix", Status.FLOAT: "float", Status.SINGLE: "single", Status.NONE: "none"}
 
 
 @dataclass
@@ -158,7 +157,7 @@ class OnboardTrain:
             return
         self.last = out
         self.stats.epochs += 1
-        self.stats.by_status[FIX_STATE.get(out.solution.status, "none")] += 1
+        self.stats.by_status[out.solution.status_name] += 1
         if self._t_first is None:
             self._t_first = rover.time
         if out.solution.status == Status.FIX and self.stats.first_fix_s is None:

@@ -52,7 +52,7 @@ def render(system) -> Group:
         tr.add_column(c)
     for tid, t in sorted(system.trains.items()):
         out = t.last
-        state = {1: "fix", 2: "float", 5: "single"}.get(int(out.solution.status), "none") if out else "none"
+        state = out.solution.status_name if out else "none"
         m = out.match if out else None
         n = max(1, t.stats.epochs)
         age = t.correction_age_s()
