@@ -201,6 +201,11 @@ def test_network_70km_with_the_centre_vrs(tmp_path):
     shift, right, lost when the VRS drops to 3 satellites at 21 s, fixed again from 37 s); switch-ons:
     time to first fix 9 s each, fixed in every epoch after the first fix, H95 1.2 cm, V95 1.9 cm;
     no wrong fix (every fixed DD integer equals the simulator's), no epoch beyond its protection level.
+
+    Measured 2026-11-22 with the centre committed at 13c7b29 and validated partial fixes counting towards
+    the confirmation: from the first epoch 199/240 fixed, first at 4 s, worst fixed error 2.8 cm;
+    switch-ons 31, 11, 9, 9, 9, 9 s, 100 % fixed after the first fix, H95 0.98 cm, V95 2.64 cm, every
+    fixed DD integer equal to the simulator's (checked outside this test), no PL exceedance.
     """
     from typer.testing import CliRunner
 
@@ -255,12 +260,15 @@ def test_network_70km_with_the_centre_vrs(tmp_path):
     assert v95 <= 0.04
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "not met with the centre of 064af28 (measured 2026-11-22): switch-ons at 30-180 s into network-70km fix "
-    "in 33, 13, 11, 11, 11, 11 s (median 11 s, goal 10 s); 100 % fixed after the first fix, H95 0.98 cm, "
-    "V95 2.64 cm, no wrong fix, no PL exceedance (asserted above). With the previous centre: 9 s."))
 def test_network_70km_vrs_median_time_to_first_fix():
-    """The median time to first fix of the switch-ons measured by the test above (which must run first)."""
+    """The median time to first fix of the switch-ons measured by the test above (which must run first):
+    at most 10 s.
+
+    Measured 2026-11-22 with the centre as committed at 13c7b29: 31, 11, 9, 9, 9, 9 s (median 9 s; before
+    validated partial fixes counted towards the 3-epoch confirmation: 33, 13, 11, 11, 11, 11, median 11).
+    The first switch-on (30 s) waits for the centre: its VRS then carries 7 satellites.  With the centre's
+    network-fixing work in progress in the same checkout (its VRS carries every satellite earlier): 5 s each
+    (7 s before)."""
     if not _VRS_SWITCH_ON_TTFF_S:
         pytest.skip("run with test_network_70km_with_the_centre_vrs (it measures the switch-ons)")
     assert np.median(_VRS_SWITCH_ON_TTFF_S) <= 10.0
