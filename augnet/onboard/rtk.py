@@ -25,8 +25,8 @@ estimated, the lowest satellite), and with the ionosphere in the model a fix is 
 3 consecutive epochs' validated integer decisions agree: a partial fix that passed every test but pins
 too few combinations for the 3 cm (the wide-lane-like ones come first) is such a decision, the fix
 declared is a complete one (network-70km VRS switch-ons: median time to first fix 11 -> 9 s).  The
-rover losing lock (overbridge, tunnel) keeps its SD ionosphere states, grown by their random walk
-over the outage: the new ambiguities are fixed against them (demo re-fixes 7 -> 2 s).  Fix-and-hold
+rover losing lock (overbridge, tunnel, up to a minute) keeps its SD ionosphere states, grown by their
+random walk over the outage: the new ambiguities are fixed against them (demo re-fixes 7 -> 2 s).  Fix-and-hold
 after 5 declared fixes.
 The covariance of a fixed solution is the float covariance conditioned on the fixed combinations, so
 it carries the estimated ionosphere's uncertainty: protection levels K sigma bound the error in
@@ -131,6 +131,11 @@ PHASE_INNOVATION_MIN_M = 0.10
 AMB_KNOWN_SIGMA_CYC = 0.5
 # Phase observations of a satellite not updated for more epochs than this lose their ambiguity.
 MAX_AMBIGUITY_OUTAGE_EPOCHS = 5
+# An SD ionosphere state not observed for longer than this [s] is dropped.  It is an atmospheric quantity,
+# not a tracking one: across a shorter outage (an overbridge, a tunnel, a satellite behind a cutting) it
+# is kept with the uncertainty its random walk has gathered (IONO_PROCESS_FRACTION_PER_SQRT_S: 23 % of
+# its prior sigma after a minute), and a satellite re-acquired with new ambiguities is fixed against it.
+MAX_IONO_OUTAGE_S = 60.0
 # Fix-and-hold: after this many consecutive fixes the integers are fed back into the float filter
 # as pseudo-observations with this variance [cycles^2] (RTKLIB uses 0.001 cycle^2 as well).
 HOLD_AFTER_FIXES = 5
@@ -239,6 +244,9 @@ class RtkSolution:
     baseline_m: float = math.nan
     velocity_m_s: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
     message: str = ""
+    # a FIX: (satellite, reference satellite, frequency slot) -> integer DD ambiguity [cycles] of every DD
+    # ambiguity the fix determines (conditional sigma below CONFIRM_SIGMA_CYC), for checks against a truth
+    fixed_dd: dict[tuple[str, str, int], int] = field(default_factory=dict)
 
     @property
     def status_name(self) -> str:
@@ -289,7 +297,7 @@ class RtkFilter:
         # a computed (non-physical) base, a network VRS: its residual atmosphere is modelled
         self.base_is_vrs = bool(base_is_vrs)
         self.ion_index: dict[str, int] = {}
-        self.ion_outage: dict[str, int] = {}
+        self.ion_seen: dict[str, float] = {}  # when each SD ionosphere state was last observed
         self.iono_active = False
         self._iono_sigma_now = 0.0
         self._candidate: dict | None = None
@@ -324,15 +332,15 @@ class RtkFilter:
         self.amb_outage[key] = 0
         return i
 
-    def _new_ion(self, sat: str, var: float) -> int:
+    def _new_ion(self, sat: str, var: float, t: float) -> int:
         i = self._new_state(0.0, var)
         self.ion_index[sat] = i
-        self.ion_outage[sat] = 0
+        self.ion_seen[sat] = t
         return i
 
     def _drop_ion(self, sat: str) -> None:
         i = self.ion_index.pop(sat, None)
-        self.ion_outage.pop(sat, None)
+        self.ion_seen.pop(sat, None)
         if i is not None:
             self._free_state(i)
 
@@ -593,10 +601,9 @@ class RtkFilter:
             self.amb_outage[key] += 1
             if self.amb_outage[key] > MAX_AMBIGUITY_OUTAGE_EPOCHS:
                 self._drop_amb(key)
-        for key in list(self.ion_outage):
-            self.ion_outage[key] += 1
-            if self.ion_outage[key] > MAX_AMBIGUITY_OUTAGE_EPOCHS:
-                self._drop_ion(key)
+        for sat, seen in list(self.ion_seen.items()):
+            if not t - seen <= MAX_IONO_OUTAGE_S:
+                self._drop_ion(sat)
 
         # linearisation point: the state's position, or for a white-noise position (kinematic without
         # dynamics, restarted from SPP every epoch) the last solution carried by its velocity, usually
@@ -623,7 +630,7 @@ class RtkFilter:
             mapping = iono_mapping(el_r)
             for k in np.flatnonzero(ok.any(axis=1)):
                 if sats[k] not in self.ion_index:
-                    self._new_ion(sats[k], (sigma0 * mapping[k]) ** 2)
+                    self._new_ion(sats[k], (sigma0 * mapping[k]) ** 2, t)
         groups = self._groups(sats, sys_, ok, el_r, nf)
         n_sat_used = len({k for g in groups for k in g.sats})
         if not groups:
@@ -687,8 +694,8 @@ class RtkFilter:
                 key = (sats[k], g.slot)
                 if key in self.amb_outage:
                     self.amb_outage[key] = 0
-                if sats[k] in self.ion_outage:
-                    self.ion_outage[sats[k]] = 0
+                if sats[k] in self.ion_seen:
+                    self.ion_seen[sats[k]] = t
         float_pos = self.x[:3].copy()
         float_cov = self.P[:3, :3].copy()
         sol = RtkSolution(t, Status.FLOAT, float_pos, float_cov, n_sat_used, age_s=age,
@@ -927,6 +934,7 @@ class RtkFilter:
                 need = self._confirm_needed()
                 if count >= need:
                     self._accept_fix(sol, fix, Hc, x_fix, P_fix, n_all)
+                    sol.fixed_dd = self._fixed_dd(dd, sats, rows, x_fix, P_fix)
                 else:
                     self.consecutive_fixes = 0
                     sol.message = f"float: fix candidate {count}/{need} ({fix.count}/{n_all} ambiguities, ratio {fix.ratio:.1f})"
@@ -1046,6 +1054,13 @@ class RtkFilter:
         if dd.ion is not None:
             pred = pred - mu[k, f] * x[dd.ion[rows]] + mu[ref, f] * x[dd.ion_ref[rows]]
         return y - pred
+
+    def _fixed_dd(self, dd: "_DD", sats, rows, x_fix, P_fix) -> dict[tuple[str, str, int], int]:
+        i, iref = dd.i[rows], dd.iref[rows]
+        var = P_fix[i, i] + P_fix[iref, iref] - 2.0 * P_fix[i, iref]
+        val = x_fix[i] - x_fix[iref]
+        return {(sats[dd.k[r]], sats[dd.ref[r]], int(dd.f[r])): int(round(a))
+                for r, a, v in zip(rows, val, var) if v < CONFIRM_SIGMA_CYC**2}
 
     def _accept_fix(self, sol, fix, Hc, x_fix, P_fix, n_all) -> None:
         sol.status = Status.FIX
