@@ -310,6 +310,9 @@ class RtkFilter:
         self.amb_index: dict[tuple[str, int], int] = {}
         self._free: list[int] = []
         self.amb_outage: dict[tuple[str, int], int] = {}
+        # a serial number per ambiguity state: a slip re-initialises it under the same key, a new arc
+        self.amb_serial: dict[tuple[str, int], int] = {}
+        self._serials = 0
         self.initialised = False
         self.t_prev = math.nan
         self.rover_slips = SlipDetector()
@@ -330,6 +333,8 @@ class RtkFilter:
         i = self._new_state(value, var)
         self.amb_index[key] = i
         self.amb_outage[key] = 0
+        self._serials += 1
+        self.amb_serial[key] = self._serials
         return i
 
     def _new_ion(self, sat: str, var: float, t: float) -> int:
@@ -368,6 +373,7 @@ class RtkFilter:
     def _drop_amb(self, key) -> None:
         i = self.amb_index.pop(key, None)
         self.amb_outage.pop(key, None)
+        self.amb_serial.pop(key, None)
         if i is not None:
             self._free_state(i)
 
@@ -970,15 +976,17 @@ class RtkFilter:
         CONFIRM_SIGMA_CYC), and the fixed decorrelated combinations themselves (what a partial fix
         determines).  The next epoch agrees when every such functional it can evaluate (its satellites
         still tracked without a slip) and determines has the same integer, and there are at least
-        min_fix_ambiguities of them.  A slip re-initialises an ambiguity: its functionals are then
-        undetermined or different, and the streak restarts."""
+        min_fix_ambiguities of them.  An ambiguity re-initialised since (a slip: a new arc under the same
+        key) is, like a satellite that has risen since, not comparable: its functionals are left out, and
+        the new integer is validated by this epoch's tests alone, against the others' agreement."""
         if self._confirm_needed() <= 1:
             return 1  # declared at once: nothing to compare with
         prev = self._candidate
         agree = False
         if prev is not None:
             keys, C, z = prev
-            idx = np.array([self.amb_index.get(k, -1) for k in keys], dtype=int)
+            idx = np.array([self.amb_index[k] if self.amb_serial.get(k) == serial else -1 for k, serial in keys],
+                           dtype=int)
             usable = ~np.any((C != 0.0) & (idx < 0)[None, :], axis=1)
             if np.count_nonzero(usable) >= self.opt.min_fix_ambiguities:
                 present = idx >= 0
@@ -994,11 +1002,11 @@ class RtkFilter:
         return self._candidate_count
 
     def _decision(self, dd: "_DD", sats, rows, Hc, z_fixed, x_fix, P_fix):
-        """(SD ambiguity keys, integer functionals over them (one per row), their integers) of a fix: the
-        DD ambiguities it determines, then its fixed combinations."""
+        """((SD ambiguity key, serial) per column, integer functionals over them (one per row), their
+        integers) of a fix: the DD ambiguities it determines, then its fixed combinations."""
         inv = {i: key for key, i in self.amb_index.items()}
         cols = np.flatnonzero(np.any(Hc != 0.0, axis=0))
-        keys = [inv[int(c)] for c in cols]
+        keys = [(inv[int(c)], self.amb_serial[inv[int(c)]]) for c in cols]
         pos = {int(c): j for j, c in enumerate(cols)}
         i, iref = dd.i[rows], dd.iref[rows]
         var = P_fix[i, i] + P_fix[iref, iref] - 2.0 * P_fix[i, iref]
