@@ -90,13 +90,21 @@ class BaselineConfig:
     # what separates the wide-lane candidates (one wide-lane cycle with the ionosphere-free phase kept is
     # 0.57-0.8 m of DD ionosphere), so it must be the day's: a quiet mid-latitude day gives DD 1-4 ppm
     # (network-rtk.md); the simulator's quiet day gives 0.9-1.5 ppm RMS per station pair in these units.
-    # The baseline raises it (never lowers it) to what its fixed satellites show (`iono_prior_adapt`).
+    # The baseline then moves it to what its fixed satellites show (`iono_prior_adapt`): the day's level.
     iono_prior_ppm: float = 1.5
     iono_prior_min_m: float = 0.01
     iono_rate_ppm_sqrt_s: float = 0.05
     iono_shell_height_km: float | None = 350.0
-    iono_prior_adapt: float = 1.2  # prior >= this times the RMS seen on fixed satellites (0: off)
+    iono_prior_adapt: float = 1.2  # the day's prior: this times the RMS seen on fixed satellites (0: off)
     iono_prior_adapt_tau_s: float = 300.0
+    # The day's level replaces the default prior, lower or higher, once this many satellites are fixed; it is
+    # the RMS's one-sided 95 % upper bound (chi-square, one degree of freedom per fixed satellite: the
+    # satellites fixed first are the ones the default prior agreed with, a sample biased low), never below
+    # the floor. Satellites already in the filter get the tighter prior as an ionosphere pseudo-observation
+    # in the integer decision (`_fix`), not in the state. On the simulator's quiet day the fixed satellites
+    # show 0.2-0.7 ppm (rising to 0.55-0.67 over ten minutes as the low ones join), a moderate day 1.0-1.6.
+    iono_day_min_sats: int = 4
+    iono_day_floor_ppm: float = 0.7
     # Initial SD ambiguity sigma [cycles]: set from code, so a few hundred cycles covers anything.
     amb_prior_sigma_cyc: float = 300.0
     # Satellites below this elevation stay float (their corrections are not produced): at 10-15 degrees the
@@ -198,7 +206,6 @@ class BaselineSolver:
         self.length_m = float(np.linalg.norm(self.xyz_b - self.xyz_a))
         self.cfg = config or BaselineConfig()
         cfg = self.cfg
-        self.iono_prior_var = (cfg.iono_prior_ppm * 1e-6 * self.length_m) ** 2
         self.iono_q = (cfg.iono_rate_ppm_sqrt_s * 1e-6 * self.length_m) ** 2
         self.tracks: dict[str, _Track] = {}
         self.refs: dict[str, str] = {}
@@ -219,6 +226,10 @@ class BaselineSolver:
         self.index: dict[str, int] = {}
         self._smooth: dict[str, tuple] = {}  # sat -> (ref, integers, t, iono, trop)
         self._iono_ms: float | None = None  # mean square of fixed satellites' DD ionosphere [ppm^2, vertical]
+        self._iono_day_own: float | None = None  # the day's prior from this baseline's fixed satellites [ppm]
+        self.iono_day_network: float | None = None  # ... from the whole network's (set by NetworkSolver) [ppm]
+        self.iono_day_q = np.zeros(0)  # this epoch's fixed satellites' DD ionosphere [ppm, vertical]
+        self._iono_p0: dict[str, float] = {}  # sat -> prior variance its SD ionosphere state started with [m^2]
 
     @property
     def name(self) -> str:
@@ -241,6 +252,7 @@ class BaselineSolver:
         P = np.zeros((n + B, n + B))
         P[:n, :n] = self.P
         P[n, n] = max(self.iono_prior_var * iono_var_scale, self.cfg.iono_prior_min_m**2)
+        self._iono_p0[sat] = P[n, n]
         P[n + 1, n + 1] = P[n + 2, n + 2] = self.cfg.amb_prior_sigma_cyc**2
         if self._mpc is not None:
             P[n + self._mpc, n + self._mpc] = P[n + self._mpc + 1, n + self._mpc + 1] = mp_code_var_m2
@@ -398,7 +410,8 @@ class BaselineSolver:
         self._hold(sats, rows, ref_k)
         self._release(sats, rows, ref_k, ga, gb, lam, gamma, sd_phase, sd_code)
         el_min = np.degrees(np.minimum(ga.elevation_rad, gb.elevation_rad))
-        ratio = self._fix(sats, rows[el_min[rows] >= cfg.fix_min_elevation_deg], ref_k, iono_hints)
+        ratio = self._fix(sats, rows[el_min[rows] >= cfg.fix_min_elevation_deg], ref_k,
+                          self._day_prior_hints(sats, rows, ref_k, iono_scale, iono_hints))
 
         # DD residuals where the integers are known
         n = len(sats)
@@ -432,16 +445,73 @@ class BaselineSolver:
         """Running mean square of the fixed satellites' DD ionosphere in the prior's units; the prior for new
         satellites is raised to `iono_prior_adapt` times its root (a storm day is not a quiet one)."""
         cfg = self.cfg
+        self.iono_day_q = np.zeros(0)
         if cfg.iono_prior_adapt <= 0 or not fixed.any():
             return
         q = dd_iono[fixed] / (1e-6 * self.length_m * np.hypot(mapping[fixed], mapping[ref_k[fixed]]))
+        q = q[np.isfinite(q)]
+        if not q.size:
+            return
+        self.iono_day_q = q
         ms = float(np.mean(q**2))
         if self._iono_ms is None:
             self._iono_ms = ms
         else:
             self._iono_ms += min(1.0, dt / cfg.iono_prior_adapt_tau_s) * (ms - self._iono_ms)
-        ppm = max(cfg.iono_prior_ppm, cfg.iono_prior_adapt * math.sqrt(self._iono_ms))
-        self.iono_prior_var = (ppm * 1e-6 * self.length_m) ** 2
+        level = day_ionosphere_ppm(math.sqrt(self._iono_ms), q.size, cfg)
+        if level is not None:
+            self._iono_day_own = level
+
+    @property
+    def iono_day_ppm(self) -> float | None:
+        """The day's ionosphere prior [ppm, vertical]: the larger of this baseline's and the network's, once
+        either is known."""
+        known = [v for v in (self._iono_day_own, self.iono_day_network) if v is not None]
+        return max(known) if known else None
+
+    @property
+    def iono_level_ppm(self) -> float:
+        """The ionosphere prior in force [ppm, vertical]: the day's level once known; before, the default
+        raised (never lowered) by what the few fixed satellites show."""
+        cfg = self.cfg
+        ppm = self.iono_day_ppm
+        if ppm is not None:
+            return ppm
+        ppm = cfg.iono_prior_ppm
+        if self._iono_ms is not None and cfg.iono_prior_adapt > 0:
+            ppm = max(ppm, cfg.iono_prior_adapt * math.sqrt(self._iono_ms))
+        return ppm
+
+    @property
+    def iono_prior_var(self) -> float:
+        """Prior variance of a new satellite's SD ionosphere state, vertical [m^2]."""
+        return (self.iono_level_ppm * 1e-6 * self.length_m) ** 2
+
+    def _day_prior_hints(self, sats, rows, ref_k, mapping, hints):
+        """The network's hints, plus, where the day's prior is tighter than the one a satellite's ionosphere
+        state (and its reference's) started with, a zero DD ionosphere pseudo-observation whose variance makes
+        up the difference (1/new = 1/old + 1/hint): as if the satellite had started with it (combined with the
+        network's hint where there is one)."""
+        if self.iono_day_ppm is None:
+            return hints
+        out = dict(hints or {})
+        day = (self.iono_day_ppm * 1e-6 * self.length_m) ** 2
+        floor = self.cfg.iono_prior_min_m**2
+        for k in rows:
+            s, r = str(sats[k]), str(sats[ref_k[k]])
+            if s in self.fixed[0] and s in self.fixed[1]:
+                continue
+            old = self._iono_p0.get(s, 0.0) + self._iono_p0.get(r, 0.0)
+            new = max(day * mapping[k] ** 2, floor) + max(day * mapping[ref_k[k]] ** 2, floor)
+            if not new < 0.9 * old:
+                continue
+            v = 1.0 / (1.0 / new - 1.0 / old)
+            h = out.get(s)
+            if h is not None and h[0] == r:  # a network hint as well: two independent pseudo-observations
+                out[s] = (r, h[1] * v / (v + h[2]), h[2] * v / (v + h[2]))
+            elif h is None:
+                out[s] = (r, 0.0, v)
+        return out
 
     def _smoothed(self, t, sats, ref_of, dd_n, fixed, iono, trop):
         """Exponential smoothing of each satellite's DD residuals while its reference and integers stay."""
@@ -742,6 +812,21 @@ class BaselineSolver:
             if s in self.fixed[0] and s in self.fixed[1]:
                 self.fixed[FREQS][s] = self.fixed[0][s] - self.fixed[1][s]
         return fix.ratio if fix is not None else 0.0
+
+
+def day_ionosphere_ppm(rms_ppm: float, n: int, cfg: BaselineConfig) -> float | None:
+    """The day's ionosphere prior from the RMS of n fixed satellites' DD ionosphere [ppm, vertical]: its 95 %
+    upper bound times `iono_prior_adapt`, never below the floor; None with too few satellites."""
+    if cfg.iono_prior_adapt <= 0 or n < cfg.iono_day_min_sats or not math.isfinite(rms_ppm):
+        return None
+    return max(cfg.iono_day_floor_ppm, cfg.iono_prior_adapt * rms_ppm * _rms_upper_bound_factor(n))
+
+
+def _rms_upper_bound_factor(n: int, z: float = 1.645) -> float:
+    """sqrt(n / chi2_{5 %}(n)): the one-sided 95 % upper bound of an RMS from n samples, over the RMS
+    (Wilson-Hilferty's approximation of the chi-square quantile)."""
+    q = n * (1.0 - 2.0 / (9.0 * n) - z * math.sqrt(2.0 / (9.0 * n))) ** 3
+    return math.sqrt(n / q)
 
 
 def _common_dual_frequency(ep_a: StationEpoch, ep_b: StationEpoch, excluded=frozenset()):

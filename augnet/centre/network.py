@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from augnet.centre.baseline import BaselineConfig, BaselineEpoch, BaselineSolver
+from augnet.centre.baseline import BaselineConfig, BaselineEpoch, BaselineSolver, day_ionosphere_ppm
 from augnet.centre.integrity import Alarm, IntegrityMonitor
 from augnet.centre.observations import StationEpoch
 from augnet.centre.satellite_geometry import SatelliteGeometry, satellite_geometry
@@ -140,6 +140,7 @@ class NetworkSolver:
             else:
                 results[(i, j)] = None
         misclosures = self._check_closures(results)
+        self._share_day_ionosphere()
         self._hints = self._iono_hints(results)
         refs = self._network_refs(results)
         sats = np.array(sorted({str(s) for r in results.values() if r is not None for s in r.sats}))
@@ -180,6 +181,21 @@ class NetworkSolver:
             present=sorted(present), clocks=dict(self.clocks), excluded=set(excluded),
             alarms=self.integrity.drain())
 
+    def _share_day_ionosphere(self) -> None:
+        """The day's ionosphere level from every baseline's fixed satellites at once (in ppm of each baseline's
+        length): a network of four baselines with three satellites fixed on each knows the day's level after the
+        first fixes, where one baseline alone would wait for more."""
+        q = np.concatenate([s.iono_day_q for s in self.solvers.values()])
+        level = day_ionosphere_ppm(float(np.sqrt(np.mean(q**2))) if q.size else math.nan, q.size, self.cfg)
+        if level is None:
+            return
+        for s in self.solvers.values():
+            # the network's level is kept until a lower one is well established (an epoch with few fixes does
+            # not reset it), and follows a higher one at once
+            prev = s.iono_day_network
+            s.iono_day_network = level if prev is None or level > prev or q.size >= 2 * self.cfg.iono_day_min_sats \
+                else prev
+
     def _iono_hints(self, results) -> dict[tuple[int, int], dict[str, tuple[str, float, float]]]:
         """For each baseline and satellite not fixed there: the DD ionosphere (against the baseline's reference)
         predicted from the other baselines where both are fixed, with a linear model per satellite pair (DD
@@ -199,6 +215,8 @@ class NetworkSolver:
                 continue
             dxt = self._dx[t]
             lt = self._len[t]
+            # the hint's error model is the quiet day's: scaled up with the day's level where it is higher
+            activity = max(1.0, self.solvers[t].iono_level_ppm / cfg.iono_prior_ppm)
             el = np.radians(np.minimum(rt.elevation_a_deg, rt.elevation_b_deg))
             mapping = 1.0 / np.sqrt(1.0 - (rr * np.cos(el)) ** 2)
             out = {}
@@ -221,7 +239,8 @@ class NetworkSolver:
                     if ks is None or kq is None:
                         continue
                     dxe = self._dx[e]
-                    var = (cfg.iono_hint_ppm_per_100km * 1e-6 * max(dist, 0.5 * lt) / 1e5 * self._len[e] * meff) ** 2
+                    var = (cfg.iono_hint_ppm_per_100km * activity * 1e-6 * max(dist, 0.5 * lt) / 1e5 * self._len[e]
+                           * meff) ** 2
                     if re.fixed[ks] and re.fixed[kq]:
                         y = re.dd_iono_m[ks] - re.dd_iono_m[kq]
                     elif (cfg.iono_hints_float and re.iono_float_m is not None and re.refs.get(s[0]) == ref
@@ -229,7 +248,8 @@ class NetworkSolver:
                         # not fixed there either: the float estimate of a baseline with no station in common
                         # (independent multipath and noise), less its prior (which this baseline has too): in
                         # information form, data = posterior - prior
-                        vp = (cfg.iono_prior_ppm * 1e-6 * self._len[e] * meff) ** 2
+                        p0 = self.solvers[e]._iono_p0
+                        vp = p0.get(s, math.nan) + p0.get(ref, math.nan)
                         v = float(re.iono_float_var_m2[ks])
                         if not v < 0.8 * vp:
                             continue
@@ -247,7 +267,7 @@ class NetworkSolver:
                 cov = np.linalg.inv(lam)
                 var = float(dxt @ cov @ dxt)
                 # only where it says more than the baseline's own prior
-                prior_dd = cfg.iono_prior_ppm * 1e-6 * lt * meff
+                prior_dd = self.solvers[t].iono_level_ppm * 1e-6 * lt * meff
                 if var < prior_dd**2:
                     out[s] = (ref, float(dxt @ cov @ vec), var)
             if out:

@@ -46,7 +46,7 @@ def normalized_errors():
 
 def test_float_wide_lane_errors_match_the_covariance(normalized_errors):
     z = normalized_errors
-    assert z.size > 1000
+    assert z.size > 500  # every 10th epoch's unfixed satellites: 934 since the network fixes faster (was ~1,300)
     rms = float(np.sqrt(np.mean(z**2)))
     print(f"\nfloat DD wide lanes (unfixed, eligible), {z.size} samples: error / sigma RMS {rms:.2f}, "
           f"|z| > 3: {np.mean(np.abs(z) > 3):.2%}")

@@ -144,24 +144,32 @@ def test_an_hour_and_three_cold_starts_without_a_wrong_fix(hour):
 
 
 def test_time_to_fix_and_fixed_share(hour):
-    """Measured with honest (multipath-aware) float covariances: the high GPS and BeiDou satellites fix within a
-    minute of a cold start, half of the fixable ones within a few minutes; the rest, Galileo E1/E5a above all
-    (its near-equivalent integer pair (3, 4) differs by 6 mm in the ionosphere-free phase and needs the DD
-    ionosphere to ~7 cm), take many minutes on these 50 km baselines."""
+    """Measured with honest (multipath-aware) float covariances and the day's ionosphere level learned from the
+    first fixed satellites over the whole network (2026-11-22: first fix median 12 s, half of the fixable
+    satellites 23 s, 80 % 45 s, all 12 cold starts; mean fixed fraction after 10 min 0.96-0.97; before the
+    day's level: half 232 s, 80 % on 4 of 12)."""
     cold = hour["cold"]
     assert np.median(cold["first"]) <= 60, cold["first"]
     assert np.isfinite(cold["first"]).all(), cold["first"]
-    assert np.median(cold[0.5]) <= 300, cold[0.5]
-    assert all(f > 0.8 for f in hour["fraction_after_10_min"].values()), hour["fraction_after_10_min"]
+    assert np.median(cold[0.5]) <= 60, cold[0.5]
+    assert all(f > 0.9 for f in hour["fraction_after_10_min"].values()), hour["fraction_after_10_min"]
 
 
-@pytest.mark.xfail(strict=True, reason="issue 5 goal not met: every baseline's fixable ambiguities within a median "
-                   "60 s. Measured (1 h + 2 cold starts of 5 min, 12 baseline cold starts): first fix median 12 s "
-                   "(max 13 s), half of the fixable satellites median 232 s, 80 % reached only on the hour's "
-                   "solver (4 of 12); the hour's new arcs (rising Galileo satellites) fix after ~30 min or not at "
-                   "all. Limits: station multipath correlated over minutes (code and phase), the quiet-day DD "
-                   "ionosphere prior, and Galileo E1/E5a's (3, 4) pair; see augnet/centre/baseline.py")
 def test_issue_goal_median_60_s(hour):
-    assert np.median(hour["cold"][0.8]) <= 60
+    """Issue 5: every baseline's ambiguities fixed within a median 60 s, read as: per baseline and cold start,
+    the time until 80 % of the satellites it may fix (above 15 degrees at both stations) are fixed, median over
+    the 12 baseline cold starts. (All of them, down to 15 degrees, is not reached within 5 minutes: the low ones
+    need minutes of code against correlated multipath, see the new arcs below.)"""
+    p80 = hour["cold"][0.8]
+    assert np.median(p80) <= 60, p80
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
+    "not met (measured 2026-11-22): satellites rising during the hour (6 arcs) fix a median 1390 s after "
+    "becoming eligible at 15 degrees (4 fixed, 2 censored). A rising satellite is low at every station at "
+    "once, so no other baseline lends it its ionosphere; at 15-20 degrees the DD ionosphere (10-17 cm on the "
+    "quiet day) and the code multipath, correlated over minutes, leave its wide lane at 0.2-0.3 cycles for "
+    "many minutes"))
+def test_new_satellite_arcs_fix_within_a_median_60_s(hour):
     ttf = hour["arc_ttf"]
     assert len(ttf) and np.median(ttf) <= 60
