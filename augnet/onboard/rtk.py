@@ -24,10 +24,11 @@ after fixing (else the worst satellite is left out and the search repeated; with
 estimated, the lowest satellite), and with the ionosphere in the model a fix is declared only when
 3 consecutive epochs' validated integer decisions agree: a partial fix that passed every test but pins
 too few combinations for the 3 cm (the wide-lane-like ones come first) is such a decision, the fix
-declared is a complete one (network-70km VRS switch-ons: median time to first fix 11 -> 9 s).  The
+declared is a complete one (network-70km VRS switch-ons: median time to first fix 11 -> 9 s); a
+satellite whose ambiguity restarted (a slip) is, like a rising one, left out of the comparison.  The
 rover losing lock (overbridge, tunnel, up to a minute) keeps its SD ionosphere states, grown by their
-random walk over the outage: the new ambiguities are fixed against them (demo re-fixes 7 -> 2 s).  Fix-and-hold
-after 5 declared fixes.
+random walk over the outage: the new ambiguities are fixed against them (demo re-fixes 7 -> 2 s).
+Fix-and-hold after 5 declared fixes.
 The covariance of a fixed solution is the float covariance conditioned on the fixed combinations, so
 it carries the estimated ionosphere's uncertainty: protection levels K sigma bound the error in
 every simulated epoch measured (baseline-10km, network-70km with a VRS under quiet to active
@@ -300,7 +301,7 @@ class RtkFilter:
         self.ion_seen: dict[str, float] = {}  # when each SD ionosphere state was last observed
         self.iono_active = False
         self._iono_sigma_now = 0.0
-        self._candidate: dict | None = None
+        self._candidate: tuple | None = None  # the last validated integer decision (see `_decision`)
         self._candidate_count = 0
         self._last_solution: tuple[float, np.ndarray, np.ndarray] | None = None
         self._spp_inputs: tuple | None = None

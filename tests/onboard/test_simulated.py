@@ -191,7 +191,8 @@ def _wrong_dd_integers(sols, folder, rover, master, rover_shift=None):
         shift = rover_shift[1] if rover_shift is not None and s.time >= rover_shift[0] else {}
         for (sat, ref, f), value in s.fixed_dd.items():
             try:
-                true = (N[(t, rover, sat)][f] - N[(t, master, sat)][f]) - (N[(t, rover, ref)][f] - N[(t, master, ref)][f])
+                true = ((N[(t, rover, sat)][f] - N[(t, master, sat)][f])
+                        - (N[(t, rover, ref)][f] - N[(t, master, ref)][f]))
             except KeyError:
                 continue
             true += shift.get((sat, f), 0) - shift.get((ref, f), 0)
