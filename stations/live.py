@@ -38,6 +38,10 @@ QUEUE_EPOCHS = 5  # at most this many epochs wait for a slow link; older ones ar
 LIVE_BLOCK_EPOCHS = 5  # simulate a few epochs ahead of the wall clock
 MSM_FIRST_TYPE, MSM_LAST_TYPE = 1071, 1137  # RTCM 10403.3: MSM1-7 of GPS ... BeiDou
 LATE_EPOCH_S = 1.0
+# real time: the next block is simulated this long after the current block's first epoch left, between
+# two epochs' bursts of work in the process that also carries the caster and the VRS (on a busy machine
+# the simulation's CPU then does not land on the correction age)
+PRODUCE_DELAY_S = 0.4
 MAX_STANDING_BYTES = 64 * 1024  # ~100 ephemeris messages: all of three constellations, twice  # live: an epoch this far behind its GPS time is dropped, not sent late
 
 
@@ -227,6 +231,12 @@ def live_scenario(sc: Scenario) -> Scenario:
     return sc.model_copy(update=dict(start=start.replace(microsecond=0)))
 
 
+async def _produce_later(loop, produce, delay_s: float):
+    if delay_s > 0:
+        await asyncio.sleep(delay_s)
+    return await loop.run_in_executor(None, produce)
+
+
 async def run_stations(sc: Scenario, host: str, port: int, *, user: str = "", password: str = "",
                        speed: float = 1.0, start_now: bool = True, stop: asyncio.Event | None = None,
                        on_ready=None, world: World | None = None, on_block=None) -> dict[str, SourceStats]:
@@ -279,7 +289,7 @@ async def run_stations(sc: Scenario, host: str, port: int, *, user: str = "", pa
             blk = await pending_block
             if blk is None:
                 break
-            pending_block = loop.run_in_executor(None, produce)
+            pending_block = asyncio.ensure_future(_produce_later(loop, produce, PRODUCE_DELAY_S if on_gps_clock else 0.0))
             if on_block is not None:
                 on_block(blk)
             for e, t in enumerate(blk.t_gpst):

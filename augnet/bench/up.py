@@ -46,7 +46,8 @@ def main(argv: list[str] | None = None) -> None:
     window = args.settle + args.epochs + 120 + args.requests * 11 * 0.05
     cmd = [sys.executable, "-m", "augnet", "up", "demo", "--duration", str(int(window)), "--no-view",
            "--db", f"sqlite:///{work / 'augnet.db'}", "--caster-port", str(caster_port),
-           "--console-port", str(console_port), "--state", str(work / "state.json")]
+           "--console-port", str(console_port), "--state", str(work / "state.json"),
+           "--report", str(work / "report.json")]
     log = open(work / "up.log", "w")
     proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT,
                             env=dict(os.environ, OPENBLAS_NUM_THREADS="1"))
@@ -85,3 +86,15 @@ def main(argv: list[str] | None = None) -> None:
     verdict = "met" if p99_age is not None and p99_age <= AGE_GOAL_P99_MS else "NOT met"
     print(f"  correction age p50 {age['p50']} ms, p99 {p99_age} ms against the {AGE_GOAL_P99_MS:.0f} ms goal "
           f"({verdict}); augnet up CPU {result['up_cpu_percent']} % of one core, RSS {result['up_rss_mb']} MB")
+    try:
+        report = json.loads((work / "report.json").read_text())
+    except (OSError, ValueError):
+        report = {}
+    stages = report.get("centre_stages_ms") or {}
+    if stages:
+        print(f"  the centre's share, age of each epoch's VRS at each stage over {stages.get('epochs')} epochs with "
+              f"{stages.get('sessions')} sessions (p50 / p90 / p99 ms; VRS planned ahead in "
+              f"{stages.get('planned_ahead')} of them):")
+        for name, v in stages.items():
+            if isinstance(v, dict):
+                print(f"    {name:24s} {v['p50']:7.1f} {v['p90']:7.1f} {v['p99']:7.1f}")

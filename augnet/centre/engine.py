@@ -12,6 +12,7 @@ from __future__ import annotations
 import itertools
 import json
 import logging
+import time
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -20,7 +21,7 @@ import numpy as np
 from augnet.centre.baseline import BaselineConfig
 from augnet.centre.ingest import EpochAligner, StationDecoder
 from augnet.centre.network import NetworkEpoch, NetworkSolver
-from augnet.centre.vrs import VrsEpoch, synthesize
+from augnet.centre.vrs import VrsEpoch, VrsPlan, synthesize
 from augnet.centre.vrs_stream import VrsStreamEncoder
 from augnet.gnss.ephemeris import Ephemeris, NavigationData
 from augnet.gnss.geometry import geodetic_deg_to_ecef
@@ -55,6 +56,19 @@ class EpochReport:
     vrs: VrsEpoch | None
     sessions: int
     stations: list[str] = field(default_factory=list)
+    # wall time (host clock, Unix s) the epoch's first and last station data reached the engine
+    arrival: tuple[float, float] | None = None
+    # interpolation model name -> satellite-point cells of this epoch's VRS that used it (what the
+    # console shows of `vrs`, which a report crossing a process boundary leaves behind)
+    vrs_models: dict[str, int] = field(default_factory=dict)
+
+
+def vrs_model_counts(vrs: VrsEpoch | None) -> dict[str, int]:
+    if vrs is None or not vrs.model.size:
+        return {}
+    from augnet.centre.interpolation import MODEL_NAMES
+    counts = np.bincount(vrs.model.ravel().astype(np.int64) + 1)
+    return {MODEL_NAMES.get(k - 1, str(k - 1)): int(c) for k, c in enumerate(counts) if c}
 
 
 class CentreEngine:
@@ -85,7 +99,16 @@ class CentreEngine:
         self.vrs_before_network = vrs_before_network
         self._prev: NetworkEpoch | None = None
         self.serving_t = np.nan  # epoch whose VRS are being produced (GPST s)
-        self.after_serve: Callable[[], None] | None = None  # called once every session's epoch is in its sink
+        self.serving_arrival: tuple[float, float] | None = None  # its stations' data arrival (Unix s)
+        # synthesis, encoding (wall), their CPU [s], 1.0 when the VRS plan made ahead was used
+        self.serve_cost_s: tuple[float, float, float, float] | None = None
+        # called after each group of `serve_group` sessions' epoch is in their sinks: after_serve(last), last
+        # True once every session's is
+        self.after_serve: Callable[[bool], None] | None = None
+        self.serve_group: int | None = None
+        self._plan: VrsPlan | None = None  # the next epoch's VRS, all but the observations (prepare_next)
+        self._last_eps: dict = {}
+        self._interval_s = 1.0
 
     # --- inputs ---------------------------------------------------------------------------------
 
@@ -142,6 +165,7 @@ class CentreEngine:
         for t, got in self.aligner.ready(now):
             if len(self.nav) == 0:
                 continue  # no broadcast ephemerides yet: nothing can be solved
+            self.serving_arrival = self.aligner.arrivals.get(t)
             reports.append(self._solve(t, got))
         return reports
 
@@ -154,7 +178,10 @@ class CentreEngine:
         if prev is not None and ids:
             vrs = self._serve(ids, prev, eps)
         ne = self.network.update(eps, self.nav)
+        if self._prev is not None and 0.0 < t - self._prev.t_gpst <= MAX_CORRECTION_LAG_S:
+            self._interval_s = t - self._prev.t_gpst
         self._prev = ne
+        self._last_eps = eps
         self.epochs_solved += 1
         if prev is None and ids:
             vrs = self._serve(ids, ne, eps)
@@ -163,32 +190,66 @@ class CentreEngine:
             self.outbox.append((SUBJECT_ALARMS.format(network=self.network_name), json.dumps({
                 "kind": alarm.kind, "subject": alarm.subject, "severity": alarm.severity,
                 "message": alarm.message, "t_gpst": alarm.t_gpst, "cleared": alarm.cleared}).encode()))
-        report = EpochReport(t, ne, vrs, len(ids), sorted(k for k, v in eps.items() if v is not None))
+        report = EpochReport(t, ne, vrs, len(ids), sorted(k for k, v in eps.items() if v is not None),
+                             self.serving_arrival, vrs_model_counts(vrs))
         self.last = report
         return report
 
     def _serve(self, ids: list[str], ne: NetworkEpoch, eps) -> VrsEpoch | None:
-        """Synthesise and encode every session's VRS epoch from `ne`'s corrections and write it to its sink."""
+        """Synthesise and encode every session's VRS epoch from `ne`'s corrections and write it to its sink.
+
+        With `serve_group` set, the sessions are encoded that many at a time and `after_serve` runs after
+        each group (their bytes can leave while the next group is encoded); `serve_cost_s` then covers
+        the synthesis (for all) and the encoding up to the group just written."""
         vrs = None
         if ids:
+            t0, c0 = time.perf_counter(), time.process_time()
             points = np.array([self.sessions[c].point_ecef for c in ids])
-            vrs = synthesize(ne, {k: v for k, v in eps.items() if v is not None}, points, self.nav)
+            vrs = synthesize(ne, {k: v for k, v in eps.items() if v is not None}, points, self.nav,
+                             plan=self._plan, keys=ids)
+            self._plan = None
+            t1 = time.perf_counter()
             if vrs is not None:
-                out = self.encoder.encode(ids, vrs, self.nav)
-                for cid in ids:
-                    s = self.sessions[cid]
-                    data = out.get(cid, b"")
-                    if not data:
-                        continue
-                    try:
-                        s.sink(data)
-                    except Exception:  # a sink that fails must not stop the others  # noqa: BLE001
-                        log.exception("VRS sink of %s failed", cid)
-                    s.bytes_sent += len(data)
-                    s.epochs_sent += 1
+                group = self.serve_group or len(ids)
+                for a in range(0, len(ids), group):
+                    sub = ids[a:a + group]
+                    out = self.encoder.encode(sub, vrs.rows(slice(a, a + group)) if group < len(ids) else vrs,
+                                              self.nav)
+                    self.serve_cost_s = (t1 - t0, time.perf_counter() - t1, time.process_time() - c0,
+                                         float(bool(vrs.flags.get("planned"))))
+                    for cid in sub:
+                        s = self.sessions[cid]
+                        data = out.get(cid, b"")
+                        if not data:
+                            continue
+                        try:
+                            s.sink(data)
+                        except Exception:  # a sink that fails must not stop the others  # noqa: BLE001
+                            log.exception("VRS sink of %s failed", cid)
+                        s.bytes_sent += len(data)
+                        s.epochs_sent += 1
+                    if self.after_serve is not None and a + group < len(ids):
+                        self.after_serve(False)
         if self.after_serve is not None:
-            self.after_serve()
+            self.after_serve(True)
         return vrs
+
+    def prepare_next(self) -> None:
+        """Build the next epoch's VRS plan now (the sessions' masters, interpolated corrections and
+        geometry from the latest network epoch; `VrsPlan`), while the centre waits for that epoch's data:
+        then only the observations are added when it arrives. It assumes the next epoch one interval on,
+        with the same stations; if not, or for a client that moved meanwhile, the VRS are planned then."""
+        ne = self._prev
+        if ne is None or not self.sessions or not self.vrs_before_network:
+            self._plan = None
+            return
+        eps = {k: v for k, v in self._last_eps.items() if v is not None}
+        plan = VrsPlan(ne, self.nav, ne.t_gpst + self._interval_s, list(eps))
+        ids = list(self.sessions)
+        plan.rows_for(np.array([self.sessions[c].point_ecef for c in ids]), ids)
+        plan.add_sats(sorted({str(s) for e in eps.values() for s in e.sats} - set(ne.excluded)))
+        plan.prepare_stations()
+        self._plan = plan
 
     def drain_outbox(self) -> list[tuple[str, bytes]]:
         out, self.outbox = self.outbox, []

@@ -178,6 +178,9 @@ class EpochAligner:
         self.max_wait_s = max_wait_s
         self._epochs: dict[float, dict[str, StationEpoch]] = {}
         self._first_seen: dict[float, float] = {}
+        self._last_seen: dict[float, float] = {}
+        # epochs released by the last `ready` call -> (first, last) arrival time of their stations' data
+        self.arrivals: dict[float, tuple[float, float]] = {}
         self.expected: set[str] = set(stations)  # stations currently delivering (others are not waited for)
         self.late_dropped = 0
         self._released_up_to = -np.inf
@@ -193,10 +196,12 @@ class EpochAligner:
             return
         self._epochs.setdefault(k, {})[ep.station] = ep
         self._first_seen.setdefault(k, now)
+        self._last_seen[k] = max(now, self._last_seen.get(k, now))
         self.expected.add(ep.station)
 
     def ready(self, now: float) -> list[tuple[float, dict[str, StationEpoch]]]:
         out = []
+        self.arrivals = {}
         for k in sorted(self._epochs):
             got = self._epochs[k]
             complete = self.expected <= set(got)
@@ -208,6 +213,7 @@ class EpochAligner:
                     self.expected = set(got) | {s for s in self.expected if any(s in e for e in self._epochs.values()
                                                                                  if e is not got)}
                 out.append((k, got))
+                self.arrivals[k] = (self._first_seen[k], self._last_seen.pop(k, self._first_seen[k]))
                 del self._epochs[k]
                 del self._first_seen[k]
                 self._released_up_to = k

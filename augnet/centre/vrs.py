@@ -65,11 +65,81 @@ class VrsEpoch:
     distance_to_master_m: np.ndarray  # (T,)
     flags: dict = field(default_factory=dict)
 
+    def rows(self, sl: slice) -> "VrsEpoch":
+        """The points in `sl` (views, not copies)."""
+        return VrsEpoch(self.t_gpst, self.points_ecef_m[sl], self.master[sl], self.sats, self.codes, self.freq_hz,
+                        self.code_m[sl], self.phase_cyc[sl], self.cnr_dbhz[sl], self.lli[sl], self.corrected[sl],
+                        self.model[sl], self.distance_to_master_m[sl], self.flags)
+
     def station_epoch(self, i: int, name: str = "VRS") -> StationEpoch:
         """Point i as an ordinary station epoch (for RINEX output or a rover engine)."""
         keep = np.isfinite(self.code_m[i]).any(axis=1)
         return StationEpoch(name, self.t_gpst, self.sats[keep], self.code_m[i][keep], self.phase_cyc[i][keep],
                             self.lli[i][keep], self.cnr_dbhz[i][keep], self.freq_hz[keep], self.codes[keep])
+
+
+class GeometryFrame:
+    """Satellite states for one epoch tag, computed once at a reference reception time and point, from
+    which the geometry at any number of points is carried (`at`); more satellites can be added later
+    (`extend`) with the same reference, so columns and rows computed at different times agree exactly."""
+
+    def __init__(self, t_tag: float, t_rx0: float, ref_pos: np.ndarray, nav: NavigationData, sats=()):
+        self.t_tag = float(t_tag)
+        self.t_rx0 = float(t_rx0)
+        self.ref_pos = np.asarray(ref_pos, float)
+        self.nav = nav
+        self.col: dict[str, int] = {}
+        self.pos = np.zeros((0, 3))
+        self.vel = np.zeros((0, 3))
+        self.clk = np.zeros(0)
+        self.drift = np.zeros(0)
+        self.tau0 = np.zeros(0)
+        self.omega = np.zeros(0)
+        self.doy = to_datetime(self.t_tag).timetuple().tm_yday
+        self.extend(sats)
+
+    def extend(self, sats) -> None:
+        new = [str(s) for s in dict.fromkeys(sats) if str(s) not in self.col]
+        if not new:
+            return
+        tr = transit(self.nav, new, self.ref_pos, self.t_rx0)
+        for s in new:
+            self.col[s] = len(self.col)
+        self.pos = np.vstack([self.pos, tr.sat_position_m])
+        self.vel = np.vstack([self.vel, tr.sat_velocity_m_s])
+        self.clk = np.concatenate([self.clk, tr.sat_clock_bias_s])
+        self.drift = np.concatenate([self.drift, tr.sat_clock_drift_s_s])
+        self.tau0 = np.concatenate([self.tau0, self.t_rx0 - tr.transmit_time_gpst])
+        self.omega = np.concatenate([self.omega, [OMEGA_E_BDS_RAD_S if s[0] == "C" else OMEGA_E_GPS_RAD_S
+                                                  for s in new]])
+
+    def cols(self, sats) -> np.ndarray:
+        self.extend(sats)
+        return np.array([self.col[str(s)] for s in sats], dtype=int)
+
+    def at(self, points_ecef_m, clock_s, cols: np.ndarray | None = None):
+        """g = rho - c dts, troposphere model and elevation (points x satellites `cols`)."""
+        pts = np.atleast_2d(np.asarray(points_ecef_m, float))
+        clk = np.broadcast_to(np.asarray(clock_s, float), (len(pts),))
+        cols = np.arange(len(self.col)) if cols is None else cols
+        pos, vel, omega, tau0 = self.pos[cols], self.vel[cols], self.omega[cols], self.tau0[cols]
+        d_rx = (self.t_tag - clk) - self.t_rx0  # (T,) each point's reception time against the reference one
+        tau = np.broadcast_to(tau0, (len(pts), len(tau0))).copy()
+        for _ in range(TRANSIT_CARRY_ITERATIONS):
+            dt_tx = d_rx[:, None] - (tau - tau0)  # transmission time against the reference one
+            xs = pos[None] + vel[None] * dt_tx[..., None]
+            ang = omega * tau
+            ca, sa = np.cos(ang), np.sin(ang)
+            rot = np.stack((xs[..., 0] * ca + xs[..., 1] * sa, -xs[..., 0] * sa + xs[..., 1] * ca, xs[..., 2]),
+                           axis=-1)
+            rng = np.linalg.norm(rot - pts[:, None, :], axis=-1)
+            tau = rng / C
+        dts = self.clk[cols][None] + self.drift[cols][None] * (d_rx[:, None] - (tau - tau0))
+        _, el = azimuth_elevation(pts[:, None, :], rot)
+        llh = ecef_to_geodetic(pts)
+        el_c = np.clip(np.where(np.isfinite(el), el, np.pi / 2), MIN_MODEL_ELEVATION_RAD, None)
+        trop = troposphere.slant_delay_m(el_c, llh[:, 0:1], llh[:, 2:3], self.doy)
+        return rng - C * dts, trop, el
 
 
 def geometry_many(sats, t_tag: float, clock_s, points_ecef_m: np.ndarray, nav: NavigationData):
@@ -83,49 +153,176 @@ def geometry_many(sats, t_tag: float, clock_s, points_ecef_m: np.ndarray, nav: N
     per point (a VRS takes its master's)."""
     pts = np.atleast_2d(np.asarray(points_ecef_m, float))
     clk = np.broadcast_to(np.asarray(clock_s, float), (len(pts),))
-    t_rx0 = t_tag - float(np.median(clk))
-    d_rx = (t_tag - clk) - t_rx0  # (T,) each point's reception time against the reference one
-    tr = transit(nav, list(sats), pts.mean(axis=0), t_rx0)
-    tau0 = t_rx0 - tr.transmit_time_gpst  # (S,)
-    omega = np.array([OMEGA_E_BDS_RAD_S if str(s)[0] == "C" else OMEGA_E_GPS_RAD_S for s in sats])
-    tau = np.broadcast_to(tau0, (len(pts), len(tau0))).copy()
-    for _ in range(TRANSIT_CARRY_ITERATIONS):
-        dt_tx = d_rx[:, None] - (tau - tau0)  # transmission time against the reference one
-        xs = tr.sat_position_m[None] + tr.sat_velocity_m_s[None] * dt_tx[..., None]
-        ang = omega * tau
-        ca, sa = np.cos(ang), np.sin(ang)
-        rot = np.stack((xs[..., 0] * ca + xs[..., 1] * sa, -xs[..., 0] * sa + xs[..., 1] * ca, xs[..., 2]), axis=-1)
-        rng = np.linalg.norm(rot - pts[:, None, :], axis=-1)
-        tau = rng / C
-    dts = tr.sat_clock_bias_s[None] + tr.sat_clock_drift_s_s[None] * (d_rx[:, None] - (tau - tau0))
-    _, el = azimuth_elevation(pts[:, None, :], rot)
-    llh = ecef_to_geodetic(pts)
-    doy = to_datetime(t_tag).timetuple().tm_yday
-    el_c = np.clip(np.where(np.isfinite(el), el, np.pi / 2), MIN_MODEL_ELEVATION_RAD, None)
-    trop = troposphere.slant_delay_m(el_c, llh[:, 0:1], llh[:, 2:3], doy)
-    return rng - C * dts, trop, el
+    frame = GeometryFrame(t_tag, t_tag - float(np.median(clk)), pts.mean(axis=0), nav, list(sats))
+    return frame.at(pts, clk)
+
+
+class VrsPlan:
+    """Everything a VRS epoch needs but the master stations' observations, for one network epoch (the
+    corrections), one epoch tag and one set of stations with data: each point's master, its interpolated
+    corrections and the geometry at the point and at the masters.
+
+    `synthesize` builds one when given none. The centre builds the next epoch's ahead, while it waits for
+    that epoch's data (`VrsEngine.prepare_next`): then only the observations are added when they arrive.
+    Points are rows keyed by their client; a client that moved or is new gets its row when asked
+    (`rows_for`), satellites new at the epoch get their geometry columns the same way, with the same
+    reference, so a plan made ahead gives the very numbers a plan made on the spot would."""
+
+    def __init__(self, net: NetworkEpoch, nav: NavigationData, t_tag: float, present: list[str],
+                 clocks: dict[str, float] | None = None):
+        self.net = net
+        self.nav = nav
+        self.t_tag = float(t_tag)
+        self.clocks = net.clocks if clocks is None else clocks
+        self.present = [i for i, s in enumerate(net.stations) if s in set(present)]
+        self.present_names = frozenset(net.stations[i] for i in self.present)
+        xyz = net.station_xyz_m
+        st_clk = np.array([self.clocks.get(net.stations[i], 0.0) for i in self.present])
+        self.frame = GeometryFrame(self.t_tag, self.t_tag - float(np.median(st_clk)) if len(st_clk) else self.t_tag,
+                                   xyz[self.present].mean(axis=0) if self.present else xyz[0], nav)
+        self.station_clk = {i: self.clocks.get(net.stations[i], 0.0) for i in self.present}
+        self._station_geo: dict[int, tuple] = {}  # station row -> (G, TROP, EL) over the frame's columns
+        self.net_col = {s: k for k, s in enumerate(net.sats)}
+        self.have_rows = [i for i in range(len(net.stations)) if net.stations[i] in net.present]
+        # per point row
+        self.keys: dict = {}
+        self.points = np.zeros((0, 3))
+        self.master_idx = np.zeros(0, int)
+        self.dist = np.zeros(0)
+        Sn = len(net.sats)
+        self.dI = np.zeros((0, Sn))
+        self.dT = np.zeros((0, Sn))
+        self.model = np.zeros((0, Sn), np.int8)
+        self._geo = [np.zeros((0, 0)), np.zeros((0, 0)), np.zeros((0, 0))]  # G, TROP, EL (rows x frame cols)
+
+    def fits(self, net: NetworkEpoch, nav: NavigationData, t_tag: float, present, clocks) -> bool:
+        return (net is self.net and nav is self.nav and float(t_tag) == self.t_tag
+                and frozenset(present) == self.present_names and (clocks is None or clocks == self.clocks))
+
+    def rows_for(self, points_ecef_m, keys=None) -> np.ndarray:
+        """Row of each point (a client whose point is unchanged keeps its row; others get new ones)."""
+        pts = np.atleast_2d(np.asarray(points_ecef_m, float))
+        if keys is None:
+            return self._add_rows(pts, [None] * len(pts))
+        rows = np.array([self.keys.get(k, -1) for k in keys], dtype=int)
+        known = rows >= 0
+        if known.any():
+            same = np.all(self.points[rows[known]] == pts[known], axis=1)
+            rows[np.flatnonzero(known)[~same]] = -1
+        fresh = np.flatnonzero(rows < 0)
+        if fresh.size:
+            rows[fresh] = self._add_rows(pts[fresh], [keys[i] for i in fresh])
+        return rows
+
+    def _add_rows(self, pts: np.ndarray, keys: list) -> np.ndarray:
+        net = self.net
+        T = len(pts)
+        first = len(self.points)
+        xyz = net.station_xyz_m
+        if self.present:
+            d = np.linalg.norm(pts[:, None, :] - xyz[None, self.present, :], axis=2)
+            nearest = np.argmin(d, axis=1)
+            master_idx = np.array(self.present)[nearest]  # (T,) row in net.stations
+            dist = d[np.arange(T), nearest]
+        else:
+            master_idx, dist = np.zeros(T, int), np.full(T, np.inf)
+        # interpolated corrections relative to the network master, per point and network satellite
+        Sn = len(net.sats)
+        dI = np.full((T, Sn), np.nan)
+        dT = np.full((T, Sn), np.nan)
+        model = np.full((T, Sn), -1, np.int8)
+        if Sn and self.have_rows and T:
+            origin = xyz[0]
+            rover_en = ecef_to_enu(pts - origin, origin)[:, :2]
+            subnet_keys = _subnets(net.station_en_m, self.have_rows, rover_en)
+            uniq, group = np.unique(subnet_keys, axis=0, return_inverse=True)
+            group = np.asarray(group).reshape(-1)
+            for g, key in enumerate(uniq):
+                rows = np.array(key)
+                who = np.flatnonzero(group == g)
+                sub_master = int(np.argmin([np.linalg.norm(net.station_en_m[r]) for r in rows]))
+                base_i = net.dd_iono_m[rows[sub_master]]
+                base_t = net.dd_trop_m[rows[sub_master]]
+                # ionosphere and troposphere side by side: the same stations have both, so one set of weights
+                both = np.hstack([net.dd_iono_m[rows] - base_i, net.dd_trop_m[rows] - base_t])
+                c_both, m_both = interpolation.interpolate(net.station_en_m[rows], rover_en[who], both,
+                                                           master=sub_master)
+                dI[who] = c_both[:, :Sn] + base_i
+                dT[who] = c_both[:, Sn:] + base_t
+                model[who] = m_both[:Sn]
+        clk = np.array([self.station_clk.get(int(m), 0.0) for m in master_idx]) if T else np.zeros(0)
+        G, TROP, EL = self.frame.at(pts, clk) if T else (np.zeros((0, len(self.frame.col))),) * 3
+        self.points = np.vstack([self.points, pts])
+        self.master_idx = np.concatenate([self.master_idx, master_idx])
+        self.dist = np.concatenate([self.dist, dist])
+        self.dI = np.vstack([self.dI, dI])
+        self.dT = np.vstack([self.dT, dT])
+        self.model = np.vstack([self.model, model])
+        self._geo = [np.vstack([a, b]) if len(a) else b for a, b in zip(self._geo, (G, TROP, EL))]
+        for i, k in enumerate(keys):
+            if k is not None:
+                self.keys[k] = first + i
+        return np.arange(first, first + T)
+
+    def add_sats(self, sats) -> None:
+        """Geometry columns for satellites not yet in the plan (every row and station)."""
+        n0 = len(self.frame.col)
+        self.frame.extend(sats)
+        n1 = len(self.frame.col)
+        if n1 == n0:
+            return
+        cols = np.arange(n0, n1)
+        if len(self.points):
+            clk = np.array([self.station_clk.get(int(m), 0.0) for m in self.master_idx])
+            extra = self.frame.at(self.points, clk, cols)
+            self._geo = [np.hstack([a, b]) if a.size else b for a, b in zip(self._geo, extra)]
+        self._station_geo = {}  # recomputed over all columns when next asked
+
+    def geometry(self, rows: np.ndarray, cols: np.ndarray):
+        return tuple(a[np.ix_(rows, cols)] for a in self._geo)
+
+    def prepare_stations(self) -> None:
+        """The geometry at every station with data (any may be a master) over the plan's satellites."""
+        for row in self.present:
+            self.station_geometry(row, np.zeros(0, int))
+
+    def station_geometry(self, row: int, cols: np.ndarray):
+        geo = self._station_geo.get(row)
+        if geo is None or geo[0].shape[1] < len(self.frame.col):
+            geo = self.frame.at(self.net.station_xyz_m[row], self.station_clk.get(row, 0.0))
+            self._station_geo[row] = geo
+        return tuple(a[0, cols] for a in geo)
 
 
 def synthesize(net: NetworkEpoch, station_epochs: dict[str, StationEpoch], points_ecef_m,
-               nav: NavigationData, clocks: dict[str, float] | None = None) -> VrsEpoch | None:
+               nav: NavigationData, clocks: dict[str, float] | None = None, plan: VrsPlan | None = None,
+               keys: list | None = None) -> VrsEpoch | None:
     """VRS observations for each point, from the network's residuals and the master stations' data.
 
     Receiver clocks of the masters default to the network's estimates; satellites the integrity monitor
-    excluded are left out of every VRS."""
-    clocks = net.clocks if clocks is None else clocks
+    excluded are left out of every VRS. `plan` (made ahead for this network epoch, epoch tag and stations,
+    see `VrsPlan`; ignored when it does not fit) and `keys` (one per point: the client, so that a plan's row
+    is reused while its point is unchanged) only save time: the result is the same."""
     pts = np.atleast_2d(np.asarray(points_ecef_m, float))
     T = len(pts)
-    present = [i for i, s in enumerate(net.stations) if station_epochs.get(s) is not None]
-    if not present:
+    present_names = [s for s in net.stations if station_epochs.get(s) is not None]
+    if not present_names:
         return None
-    xyz = net.station_xyz_m
-    d = np.linalg.norm(pts[:, None, :] - xyz[None, present, :], axis=2)
-    master_idx = np.array(present)[np.argmin(d, axis=1)]  # (T,) row in net.stations
+    t_tag = float(station_epochs[present_names[0]].t_gpst)
+    planned = plan is not None and plan.fits(net, nav, t_tag, present_names, clocks)
+    if not planned:
+        plan = VrsPlan(net, nav, t_tag, present_names, clocks)
+        keys = None
+    rows = plan.rows_for(pts, keys)
+    master_idx = plan.master_idx[rows]
+    dist = plan.dist[rows]
+    masters = sorted(set(master_idx.tolist()))
     # the union of satellites the masters observe, in a fixed order
-    sat_set = sorted({str(s) for i in set(master_idx.tolist()) for s in station_epochs[net.stations[i]].sats}
-                     - set(net.excluded))
+    sat_set = sorted({str(s) for i in masters for s in station_epochs[net.stations[i]].sats} - set(net.excluded))
     sats = np.array(sat_set)
     S = len(sats)
+    plan.add_sats(sat_set)
+    gcols = plan.frame.cols(sat_set)
     code = np.full((T, S, 2), np.nan)
     phase = np.full((T, S, 2), np.nan)
     cnr = np.full((T, S, 2), np.nan)
@@ -134,50 +331,26 @@ def synthesize(net: NetworkEpoch, station_epochs: dict[str, StationEpoch], point
     codes = np.full((S, 2), "", dtype="<U2")
     corrected = np.zeros((T, S), bool)
     model = np.full((T, S), -1, np.int8)
-    net_col = {s: k for k, s in enumerate(net.sats)}
-    cols_in_net = np.array([net_col.get(s, -1) for s in sats])
+    cols_in_net = np.array([plan.net_col.get(s, -1) for s in sat_set], dtype=int)
     # interpolated corrections relative to the network master, per point (T, S)
     dI = np.full((T, S), np.nan)
     dT = np.full((T, S), np.nan)
-    origin = xyz[0]
-    rover_en = ecef_to_enu(pts - origin, origin)[:, :2]
-    have_rows = [i for i in range(len(net.stations)) if net.stations[i] in net.present]
-    if len(net.sats) and have_rows:
-        subnet_keys = _subnets(net.station_en_m, have_rows, rover_en)
-        uniq, group = np.unique(subnet_keys, axis=0, return_inverse=True)
-        group = np.asarray(group).reshape(-1)
-        for g, key in enumerate(uniq):
-            rows = np.array(key)
-            who = np.flatnonzero(group == g)
-            sub_master = int(np.argmin([np.linalg.norm(net.station_en_m[r]) for r in rows]))
-            base_i = net.dd_iono_m[rows[sub_master]]
-            base_t = net.dd_trop_m[rows[sub_master]]
-            # ionosphere and troposphere side by side: the same stations have both, so one set of weights
-            nsat = base_i.shape[0]
-            both = np.hstack([net.dd_iono_m[rows] - base_i, net.dd_trop_m[rows] - base_t])
-            c_both, m_both = interpolation.interpolate(net.station_en_m[rows], rover_en[who], both, master=sub_master)
-            ci, ct, mi = c_both[:, :nsat], c_both[:, nsat:], m_both[:nsat]
-            ok = cols_in_net >= 0
-            dI[np.ix_(who, np.flatnonzero(ok))] = (ci + base_i)[:, cols_in_net[ok]]
-            dT[np.ix_(who, np.flatnonzero(ok))] = (ct + base_t)[:, cols_in_net[ok]]
-            model[np.ix_(who, np.flatnonzero(ok))] = mi[cols_in_net[ok]]
-    dist = d[np.arange(T), np.searchsorted(present, master_idx)] if T else np.zeros(0)
-    masters = sorted(set(master_idx.tolist()))
-    # one geometry computation for every master and every point (each at its master's receiver clock)
-    t_tag = float(station_epochs[net.stations[masters[0]]].t_gpst)
-    all_pts = np.vstack([xyz[masters], pts])
-    all_clk = np.array([clocks.get(net.stations[m], 0.0) for m in masters]
-                       + [clocks.get(net.stations[m], 0.0) for m in master_idx])
-    G, TROP, EL = geometry_many(sats, t_tag, all_clk, all_pts, nav)
-    for m_i, mrow in enumerate(masters):
+    ok = np.flatnonzero(cols_in_net >= 0)
+    if ok.size:
+        sel = np.ix_(rows, cols_in_net[ok])
+        dI[:, ok] = plan.dI[sel]
+        dT[:, ok] = plan.dT[sel]
+        model[:, ok] = plan.model[sel]
+    G, TROP, EL = plan.geometry(rows, gcols)
+    for mrow in masters:
         name = net.stations[mrow]
         ep = station_epochs[name]
         ep = ep.subset(~np.isin(ep.sats, list(net.excluded))) if net.excluded else ep
         who = np.flatnonzero(master_idx == mrow)
         col = np.searchsorted(sats, ep.sats)
-        g_m, trop_m = G[m_i, col][None], TROP[m_i, col][None]
-        rows_v = len(masters) + who
-        g_v, trop_v, el_v = G[np.ix_(rows_v, col)], TROP[np.ix_(rows_v, col)], EL[np.ix_(rows_v, col)]
+        g_all, trop_all, _ = plan.station_geometry(mrow, gcols)
+        g_m, trop_m = g_all[col][None], trop_all[col][None]
+        g_v, trop_v, el_v = G[np.ix_(who, col)], TROP[np.ix_(who, col)], EL[np.ix_(who, col)]
         # corrections between point and this master: (point - net master) - (this master - net master)
         m_cols = cols_in_net[col]
         if len(net.sats):
@@ -206,10 +379,9 @@ def synthesize(net: NetworkEpoch, station_epochs: dict[str, StationEpoch], point
         corrected[np.ix_(who, col)] = has & use
         freq[col] = f
         codes[col] = ep.codes
-    return VrsEpoch(t_gpst=float(station_epochs[net.stations[present[0]]].t_gpst),
-                    points_ecef_m=pts, master=[net.stations[i] for i in master_idx], sats=sats, codes=codes,
-                    freq_hz=freq, code_m=code, phase_cyc=phase, cnr_dbhz=cnr, lli=lli, corrected=corrected,
-                    model=model, distance_to_master_m=dist)
+    return VrsEpoch(t_gpst=t_tag, points_ecef_m=pts, master=[net.stations[i] for i in master_idx], sats=sats,
+                    codes=codes, freq_hz=freq, code_m=code, phase_cyc=phase, cnr_dbhz=cnr, lli=lli,
+                    corrected=corrected, model=model, distance_to_master_m=dist, flags={"planned": planned})
 
 
 def _subnets(station_en: np.ndarray, rows: list[int], rover_en: np.ndarray) -> np.ndarray:

@@ -51,6 +51,7 @@ class Client:
     last_eph: float = -np.inf
     moved: bool = True
     station_frames: bytes = b""  # framed 1006 + 1033, encoded when the point is set (resent from here)
+    descriptor_frame: bytes = b""  # framed 1033 (the station id's: encoded once)
 
 
 class VrsStreamEncoder:
@@ -91,12 +92,23 @@ class VrsStreamEncoder:
         self._corrected[row] = np.nan
         self._grow_eph(row + 1, len(self._sat_ids))
         self._eph_sent[row] = -1
-        self.clients[client_id] = Client(station_id, np.asarray(point_ecef, float), row)
+        c = self.clients[client_id] = Client(station_id, np.asarray(point_ecef, float), row)
+        c.descriptor_frame = encode_frame(descriptor_message(station_id, f"VRS{station_id}", VRS_ANTENNA,
+                                                             VRS_RECEIVER, FIRMWARE))
+        self._station_frames(c)
 
     def move(self, client_id: str, point_ecef) -> None:
         c = self.clients[client_id]
         c.point = np.asarray(point_ecef, float)
         c.moved = True
+        self._station_frames(c)
+
+    @staticmethod
+    def _station_frames(c: Client) -> None:
+        """The client's 1006 + 1033, encoded when its point is set (a hundred microseconds, between epochs
+        when the centre runs on its own: off the correction age's path) and resent from here."""
+        c.station_frames = encode_frame(arp_message(c.station_id, c.point, antenna_height_m=0.0,
+                                                    non_physical=True)) + c.descriptor_frame
 
     def remove(self, client_id: str) -> None:
         c = self.clients.pop(client_id, None)
@@ -156,13 +168,6 @@ class VrsStreamEncoder:
             if c.master and c.master != vrs.master[i]:
                 self._lock_t0[c.row] = np.nan  # new master, new ambiguities: every lock restarts
             c.master = vrs.master[i]
-            if c.moved or not c.station_frames:
-                # encoded once per position (a few hundred microseconds): re-encoding 2,000 clients' station
-                # messages every STATION_INTERVAL_S was a half-second stall
-                c.station_frames = (
-                    encode_frame(arp_message(c.station_id, c.point, antenna_height_m=0.0, non_physical=True))
-                    + encode_frame(descriptor_message(c.station_id, f"VRS{c.station_id}", VRS_ANTENNA,
-                                                      VRS_RECEIVER, FIRMWARE)))
             if c.moved or t - c.last_arp >= STATION_INTERVAL_S:
                 out[cid] += c.station_frames
                 c.last_arp = t

@@ -1,31 +1,86 @@
-"""The control centre as a service inside `augnet up`: the sans-IO `CentreEngine` run in a worker thread.
+"""The control centre as a service inside `augnet up`: the sans-IO `CentreEngine` in its own process.
 
-Why a thread: one network epoch (solve + VRS for every connected train) takes tens to hundreds of ms,
-which must not stall the event loop that carries the caster's sockets. The loop side only queues:
-station bytes from the caster's taps (`feed`), VRS sessions opened / moved / closed by the caster's VRS
-mountpoint (`CentreService` is its stream factory). The worker applies the queue, ticks the engine
-every `TICK_S`, and hands every client's RTCM back to the loop in one `call_soon_threadsafe` per epoch
-(the caster's sinks must be called on its loop). Reports (network epochs, alarms, the correction model
-for the bus) go to `on_epoch`, also on the loop.
+Why a process: one network epoch (VRS synthesis and encoding for every connected train, then the network
+solve) is tens to hundreds of ms of Python and numpy. In a thread of the `augnet up` process it shared the
+GIL with the event loop carrying the caster's thousands of sockets, the simulated stations, the console,
+the RSSP-I link and the onboard trains: each waited for the other, and the correction age's tail grew with
+it. In its own process the engine has a core to itself while the loop writes the previous epoch's bytes.
+
+The loop side (`CentreService`, the caster's VRS stream factory) keeps only: station bytes from the caster's
+taps (minus the stations an operator disabled), VRS sessions opened / moved / closed by the caster, and the
+per-client bytes the centre returns, written to the caster's sinks. Everything else (decoding, epoch
+alignment, network solve, VRS synthesis and RTCM encoding) runs in the child, `_CentreWorker`.
+
+Message interface (both directions over one Unix socket pair; each message one frame: a 4-byte big-endian
+length, then a pickled tuple; pickle because both ends are this code base and it carries bytes and numpy
+arrays without copies of its own):
+
+  loop -> centre, one frame per loop iteration holding a list of commands in the order they happened:
+    ("data", station, rtcm_bytes, arrival_unix_s)   bytes of a station's stream as the caster got them
+    ("open", client_id, lat_deg, lon_deg, h_m)       a VRS session (the client's first usable GGA)
+    ("move", client_id, lat_deg, lon_deg, h_m)       the client moved (the caster's reposition policy)
+    ("close", client_id)
+    ("written", t_gpst)                              the last group of epoch t's VRS is written to the
+                                                     sockets: the centre may solve the network
+    ("stop",)                                        finish and exit (EOF on the socket does the same)
+  centre -> loop:
+    ("ready", pid)
+    ("vrs", t_gpst, [(client_id, rtcm_bytes), ...], ready_unix_s, (first, last) station arrival | None,
+     (synthesis_s, encoding_s, cpu_s, planned_ahead), last_group)
+        the sessions' epoch t, in groups of `VRS_GROUP` sessions each sent as soon as it is encoded (the
+        loop writes one group while the centre encodes the next), all before the network solves t: the
+        solve waits for "written" (at most `WRITTEN_WAIT_S`), so on two cores it does not take a core
+        from the delivery
+    ("epoch", [EpochReport, ...], [(bus subject, payload), ...], solve_s, sessions)
+        the solved epochs (their `vrs` arrays left behind: `vrs_models` carries what the console shows),
+        the correction models and alarms for the bus
+    ("error", text)                                  a command or an epoch failed; the centre carries on
+    ("alive",)                                       a heartbeat when nothing else was sent for a second
+
+A child that dies, or stops answering for `HANG_S` (then it is killed), is reported (log, a critical
+`centre-process` alarm through `on_alarm`) and restarted with the open sessions (a fresh network
+solution: its ambiguities are fixed again); the alarm clears with the new child's first solved epoch. Shutdown sends "stop", waits, then terminates and kills: no orphan.
+The child ignores SIGINT (Ctrl-C reaches the whole process group; the parent decides) and exits when the
+parent's end of the socket closes, so it cannot outlive it.
 """
 
 from __future__ import annotations
 
+import asyncio
 import collections
+import dataclasses
 import logging
-import threading
+import multiprocessing as mp
+import os
+import pickle
+import select
+import signal
+import socket
+import struct
 import time
+import traceback
 from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 
-from augnet.centre.engine import CentreEngine, EpochReport
 from augnet.gnss import time as gtime
 
 log = logging.getLogger(__name__)
 
-TICK_S = 0.02  # the worker looks for complete epochs this often (stations deliver within a few ms)
+# sessions encoded at a time: a group's bytes go to the loop while the centre encodes the next (2,000 trains
+# in groups of 500: the first group leaves after a quarter of the encoding, for 20 % more encoding work)
+VRS_GROUP = 500
+WRITTEN_WAIT_S = 0.2  # the network solve waits this long at most for the loop to write an epoch's VRS
+SOCKET_BUFFER_BYTES = 4 << 20
+TICK_S = 0.02  # the centre looks for timed-out epochs this often (a complete epoch is solved on arrival)
+STOP_TIMEOUT_S = 5.0
+HEARTBEAT_S = 1.0  # the centre sends at least this often ("alive" when it has nothing else)
+HANG_S = 20.0  # a centre silent this long is taken for hung: killed, reported and replaced
+RESTART_DELAY_S = 1.0
+MAX_RESTARTS = 5  # per run: a centre that keeps dying stays down (its alarm stays raised)
+_HEAD = struct.Struct(">I")
+_RECV = 1 << 20
 
 
 @dataclass
@@ -33,12 +88,46 @@ class CentreTimings:
     """Per solved epoch: wall time spent [s] (for the live view and the run report)."""
 
     solve_s: collections.deque = field(default_factory=lambda: collections.deque(maxlen=600))
-    # VRS of an epoch handed to the loop, and written to every client's socket: host clock minus the
+    # VRS of an epoch ready in the centre, and written to every client's socket: host clock minus the
     # epoch's GPS time [s] (the centre's share of the correction age)
     vrs_ready_s: collections.deque = field(default_factory=lambda: collections.deque(maxlen=600))
     vrs_sent_s: collections.deque = field(default_factory=lambda: collections.deque(maxlen=600))
+    # per served epoch: [t_gpst, sessions, station data complete, last group ready, first group on the loop,
+    # last group written] (ages, s), then the centre's synthesis and encoding (wall) and their CPU time, and
+    # the loop's time writing the groups to the sinks [s], 1 when the VRS were planned ahead
+    stages: collections.deque = field(default_factory=lambda: collections.deque(maxlen=3600))
     epochs: int = 0
     sessions_max: int = 0
+
+
+@dataclass(frozen=True)
+class CentreSpec:
+    """What the child builds its engine from (plain values: it crosses the process boundary)."""
+
+    stations: dict[str, tuple[float, float, float]]  # name -> ECEF [m]
+    t_ref_gpst: float
+    network_name: str = "line"
+
+
+def _frame(msg) -> bytes:
+    data = pickle.dumps(msg, protocol=5)
+    return _HEAD.pack(len(data)) + data
+
+
+def _split_frames(buf: bytearray) -> list:
+    """Complete messages at the head of `buf` (consumed from it)."""
+    out = []
+    pos = 0
+    n = len(buf)
+    while n - pos >= 4:
+        size = _HEAD.unpack_from(buf, pos)[0]
+        if n - pos - 4 < size:
+            break
+        out.append(pickle.loads(memoryview(buf)[pos + 4:pos + 4 + size]))
+        pos += 4 + size
+    if pos:
+        del buf[:pos]
+    return out
 
 
 class _Handle:
@@ -47,43 +136,99 @@ class _Handle:
         self.client_id = client_id
 
     def update_position(self, fix) -> None:
-        self.service._commands.append(("move", self.client_id, fix.lat_deg, fix.lon_deg, fix.height_m))
+        self.service._move(self.client_id, fix.lat_deg, fix.lon_deg, fix.height_m)
 
     def close(self) -> None:
-        self.service._commands.append(("close", self.client_id))
-        self.service._sinks.pop(self.client_id, None)
+        self.service._close(self.client_id)
+
+
+class _Channel(asyncio.Protocol):
+    """The loop's end of the socket pair: frames in, to the service."""
+
+    def __init__(self, service: "CentreService"):
+        self.service = service
+        self.buf = bytearray()
+        self.transport: asyncio.Transport | None = None
+
+    def connection_made(self, transport) -> None:
+        self.transport = transport
+
+    def data_received(self, data: bytes) -> None:
+        self.buf += data
+        try:
+            msgs = _split_frames(self.buf)
+        except Exception:  # noqa: BLE001 - a garbled stream: drop it, the child is restarted
+            log.exception("centre: unreadable message from the centre process")
+            self.buf.clear()
+            if self.transport is not None:
+                self.transport.close()
+            return
+        for msg in msgs:
+            self.service._on_message(msg)
+
+    def connection_lost(self, exc) -> None:
+        self.service._on_lost(self)
 
 
 class CentreService:
-    """Stream factory for the caster's VRS mountpoint + the engine's worker thread."""
+    """Stream factory for the caster's VRS mountpoint; the engine runs in a child process."""
 
-    def __init__(self, engine: CentreEngine, loop, on_epoch: Callable[[EpochReport, float], None] | None = None,
-                 on_outbox: Callable[[list[tuple[str, bytes]]], None] | None = None):
-        self.engine = engine
+    def __init__(self, spec: CentreSpec, loop: asyncio.AbstractEventLoop,
+                 on_epoch: Callable | None = None, on_outbox: Callable[[list[tuple[str, bytes]]], None] | None = None,
+                 on_alarm: Callable[[str, str, str, str, bool], None] | None = None, hang_s: float = HANG_S):
+        self.spec = spec
+        self.hang_s = hang_s
         self.loop = loop
         self.on_epoch = on_epoch
         self.on_outbox = on_outbox
-        self._inbox: collections.deque = collections.deque()  # (station, bytes, arrival wall time)
-        self._commands: collections.deque = collections.deque()
-        self._sinks: dict[str, Callable[[bytes], None]] = {}  # loop-side sinks of live sessions
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="augnet-centre", daemon=True)
+        self.on_alarm = on_alarm
         self.timings = CentreTimings()
-        self._batch: list[tuple[str, bytes]] = []
-        engine.after_serve = self._flush_vrs  # VRS leave as soon as they exist, before the network solve
-        self.errors = 0
+        self.errors = 0  # failed commands and epochs in the centre, unreadable messages, child deaths
+        self.restarts = 0
         self.excluded_stations: set[str] = set()
+        self.last = None  # the latest EpochReport
+        self.pid: int | None = None
+        self._sinks: dict[str, Callable[[bytes], None]] = {}  # loop-side sinks of live sessions
+        self._positions: dict[str, tuple[float, float, float]] = {}  # to re-open them in a new child
+        self._pending: list[tuple] = []
+        self._flush_scheduled = False
+        self._proc = None
+        self._channel: _Channel | None = None
+        self._stopping = False
+        self._alarm_raised = False
+        self._gps_minus_unix = gtime.now_gpst() - time.time()
+        self._last_heard = 0.0  # loop time of the centre's last message
+        self._watchdog: asyncio.Task | None = None
 
-    # --- loop side ---------------------------------------------------------------------------------
+    @property
+    def stations(self) -> list[str]:
+        return list(self.spec.stations)
+
+    @property
+    def alive(self) -> bool:
+        return self._proc is not None and self._proc.is_alive() and self._channel is not None
+
+    # --- loop side: the caster's taps and VRS mountpoint ------------------------------------------------
 
     def feed(self, station: str, data: bytes) -> None:
         if station not in self.excluded_stations:
-            self._inbox.append((station, data, time.time()))
+            self._send(("data", station, data, time.time()))
 
     def open(self, client_id: str, mount: str, fix, sink) -> _Handle:
         self._sinks[client_id] = sink
-        self._commands.append(("open", client_id, fix.lat_deg, fix.lon_deg, fix.height_m))
+        self._positions[client_id] = (fix.lat_deg, fix.lon_deg, fix.height_m)
+        self._send(("open", client_id, fix.lat_deg, fix.lon_deg, fix.height_m))
         return _Handle(self, client_id)
+
+    def _move(self, client_id: str, lat: float, lon: float, h: float) -> None:
+        if client_id in self._sinks:
+            self._positions[client_id] = (lat, lon, h)
+            self._send(("move", client_id, lat, lon, h))
+
+    def _close(self, client_id: str) -> None:
+        if self._sinks.pop(client_id, None) is not None:
+            self._positions.pop(client_id, None)
+            self._send(("close", client_id))
 
     def set_station_enabled(self, station: str, enabled: bool) -> None:
         """An operator disabled (or re-enabled) a station: its data stops reaching the solution, so
@@ -93,68 +238,187 @@ class CentreService:
         else:
             self.excluded_stations.add(station)
 
-    def start(self) -> "CentreService":
-        self._thread.start()
+    def _send(self, cmd: tuple) -> None:
+        self._pending.append(cmd)
+        if not self._flush_scheduled:
+            self._flush_scheduled = True
+            self.loop.call_soon(self._flush)
+
+    def _flush(self) -> None:
+        self._flush_scheduled = False
+        ch = self._channel
+        if ch is None or ch.transport is None or ch.transport.is_closing():
+            if len(self._pending) > 100_000:  # no centre for a long while: station bytes are not kept
+                self._pending = [c for c in self._pending if c[0] != "data"]
+            return
+        cmds, self._pending = self._pending, []
+        if cmds:
+            ch.transport.write(_frame(cmds))
+
+    # --- life cycle ---------------------------------------------------------------------------------------
+
+    async def start(self) -> "CentreService":
+        await self._spawn()
+        self._watchdog = asyncio.ensure_future(self._watch())
         return self
 
-    def stop(self, timeout: float = 5.0) -> None:
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(timeout)
+    async def _watch(self) -> None:
+        """A centre that stops answering (it sends at least a heartbeat a second) is killed: its death is
+        then reported and it is replaced like any other."""
+        while not self._stopping:
+            await asyncio.sleep(min(1.0, self.hang_s / 4))
+            proc = self._proc
+            if (self._channel is not None and proc is not None and proc.is_alive()
+                    and self.loop.time() - self._last_heard > self.hang_s):
+                log.error("centre process %s has not answered for %.0f s: killed", proc.pid, self.hang_s)
+                proc.kill()
 
-    # --- worker side -------------------------------------------------------------------------------
+    async def _spawn(self) -> None:
+        ctx = mp.get_context("spawn")
+        mine, theirs = socket.socketpair()
+        for sock in (mine, theirs):  # room for a whole epoch of VRS in flight (capped by net.core.wmem_max)
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SOCKET_BUFFER_BYTES)
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, SOCKET_BUFFER_BYTES)
+        # small numpy matrices: one BLAS thread each (two would spin against the loop on two cores)
+        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+        proc = ctx.Process(target=_child_main, args=(theirs, self.spec), name="augnet-centre", daemon=True)
+        proc.start()
+        theirs.close()
+        self._proc = proc
+        self.pid = proc.pid
+        self._last_heard = self.loop.time()  # it has the start-up (imports, engine) on top to answer
+        _, channel = await self.loop.create_connection(lambda: _Channel(self), sock=mine)
+        self._channel = channel
+        # sessions the caster already has (after a restart) first, then whatever queued meanwhile
+        reopen = [("open", cid, *pos) for cid, pos in self._positions.items()]
+        pending = [c for c in self._pending if c[0] != "open"] if reopen else self._pending
+        self._pending = reopen + pending
+        self._flush()
 
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            try:
-                self._step()
-            except Exception:  # noqa: BLE001 - the centre keeps serving; the error is counted and logged
-                self.errors += 1
-                log.exception("centre step failed")
-            self._stop.wait(TICK_S)
+    async def stop(self, timeout: float = STOP_TIMEOUT_S) -> None:
+        self._stopping = True
+        if self._watchdog is not None:
+            self._watchdog.cancel()
+        proc = self._proc
+        ch = self._channel
+        if ch is not None and ch.transport is not None and not ch.transport.is_closing():
+            self._pending.append(("stop",))
+            self._flush()
+        if proc is not None:
+            await self.loop.run_in_executor(None, proc.join, timeout)
+            if proc.is_alive():
+                log.warning("centre process %s did not stop within %.0f s: terminated", proc.pid, timeout)
+                proc.terminate()
+                await self.loop.run_in_executor(None, proc.join, 2.0)
+            if proc.is_alive():
+                proc.kill()
+                await self.loop.run_in_executor(None, proc.join, 2.0)
+        if ch is not None and ch.transport is not None:
+            ch.transport.close()
+        self._channel = None
 
-    def _step(self) -> None:
-        eng = self.engine
-        while self._commands:
-            cmd = self._commands.popleft()
-            if cmd[0] == "open":
-                _, cid, lat, lon, h = cmd
-                eng.open_session(cid, lat, lon, h, _Collector(self, cid))
-            elif cmd[0] == "move":
-                eng.move_session(*cmd[1:])
-            elif cmd[0] == "close":
-                eng.close_session(cmd[1])
-        while self._inbox:
-            station, data, at = self._inbox.popleft()
-            eng.feed(station, data, at)
-        t0 = time.perf_counter()
-        reports = eng.tick(time.time())
-        self._flush_vrs()
-        if not reports:
+    def _on_lost(self, channel: _Channel) -> None:
+        if channel is not self._channel:
             return
-        dt = time.perf_counter() - t0
-        self.timings.solve_s.append(dt / len(reports))
-        self.timings.epochs += len(reports)
-        self.timings.sessions_max = max(self.timings.sessions_max, len(eng.sessions))
-        outbox = eng.drain_outbox()
-        done_at = time.time()
-        self.loop.call_soon_threadsafe(self._deliver, reports, outbox, done_at)
+        self._channel = None
+        if self._stopping:
+            return
+        self.errors += 1
+        code = self._proc.exitcode if self._proc is not None else None
+        if self._proc is not None and code is None:
+            self._proc.join(0.5)  # the socket closes a moment before the process is reaped
+            code = self._proc.exitcode
+        msg = f"centre process {self.pid} died (exit code {code})"
+        log.error("%s; %s", msg, "restarting it" if self.restarts < MAX_RESTARTS else "not restarted again")
+        self._alarm(False, msg)
+        if self.restarts < MAX_RESTARTS:
+            self.restarts += 1
+            self.loop.call_later(RESTART_DELAY_S, lambda: asyncio.ensure_future(self._restart()))
 
-    def _flush_vrs(self) -> None:
-        """Worker side: hand the epoch's VRS bytes to the loop in one call."""
-        if self._batch:
-            batch, self._batch = self._batch, []
-            t = self.engine.serving_t
-            self.timings.vrs_ready_s.append(gtime.now_gpst() - t)
-            self.loop.call_soon_threadsafe(self._send_vrs, batch, t)
+    async def _restart(self) -> None:
+        if self._stopping:
+            return
+        try:
+            await self._spawn()
+        except Exception:  # noqa: BLE001 - logged; the alarm stays raised
+            self.errors += 1
+            log.exception("centre process could not be restarted")
 
-    def _send_vrs(self, batch, t_gpst: float) -> None:
-        """On the loop: every client's epoch to its caster sink."""
+    def _alarm(self, cleared: bool, message: str) -> None:
+        if cleared == (not self._alarm_raised):
+            return
+        self._alarm_raised = not cleared
+        if self.on_alarm is not None:
+            try:
+                self.on_alarm("centre-process", "centre", "critical", message, cleared)
+            except Exception:  # noqa: BLE001
+                log.exception("centre alarm handler failed")
+
+    # --- loop side: what the centre sends -----------------------------------------------------------------
+
+    def _on_message(self, msg) -> None:
+        kind = msg[0]
+        self._last_heard = self.loop.time()
+        try:
+            if kind == "vrs":
+                self._send_vrs(*msg[1:])
+            elif kind == "epoch":
+                self._deliver(*msg[1:])
+            elif kind == "error":
+                self.errors += 1
+                log.error("centre: %s", msg[1])
+            elif kind == "ready":
+                log.info("centre process %s ready", msg[1])
+        except Exception:  # noqa: BLE001 - a consumer's bug must not stop the centre's output
+            self.errors += 1
+            log.exception("centre: handling a %r message failed", kind)
+
+    def _send_vrs(self, t_gpst: float, batch, ready_unix: float, arrival, cost=None, last: bool = True) -> None:
+        """Every client's epoch (or a group of clients': an epoch may come in several messages) to its
+        caster sink; after the last group, "written" tells the centre it may solve the network."""
+        off = self._gps_minus_unix
+        on_loop = time.time() + off - t_gpst
+        sinks = self._sinks
         for cid, data in batch:
-            sink = self._sinks.get(cid)
+            sink = sinks.get(cid)
             if sink is not None:
                 sink(data)
-        self.timings.vrs_sent_s.append(gtime.now_gpst() - t_gpst)
+        if last:
+            self._send(("written", t_gpst))
+        sent = time.time() + off - t_gpst
+        ready = ready_unix + off - t_gpst
+        cost = cost or (np.nan, np.nan, np.nan, np.nan)
+        stages = self.timings.stages
+        if stages and stages[-1][0] == t_gpst:  # a further group of the epoch
+            rec = stages[-1]
+            rec[1] += len(batch)
+            rec[3], rec[5], rec[6:9], rec[10] = ready, sent, list(cost[:3]), cost[3]
+            rec[9] += sent - on_loop
+            self.timings.vrs_ready_s[-1] = ready
+            self.timings.vrs_sent_s[-1] = sent
+            return
+        self.timings.vrs_ready_s.append(ready)
+        self.timings.vrs_sent_s.append(sent)
+        stages.append([t_gpst, len(batch), arrival[1] + off - t_gpst if arrival else np.nan,
+                       ready, on_loop, sent, *cost[:3], sent - on_loop, cost[3]])
+
+    def _deliver(self, reports, outbox, solve_s: float, sessions: int) -> None:
+        """The reports of the solved epochs."""
+        done_at = time.time()
+        self._gps_minus_unix = gtime.now_gpst() - done_at
+        self.timings.solve_s.append(solve_s)
+        self.timings.epochs += len(reports)
+        self.timings.sessions_max = max(self.timings.sessions_max, sessions)
+        if reports:
+            self.last = reports[-1]
+            self._alarm(True, "centre process running")
+        if self.on_outbox is not None and outbox:
+            self.on_outbox(outbox)
+        if self.on_epoch is not None:
+            for r in reports:
+                self.on_epoch(r, done_at)
+
+    # --- figures ------------------------------------------------------------------------------------------
 
     def latency_ms_p99(self, recent: int = 60) -> dict:
         """p99 over the last `recent` epochs (the live picture, not the start-up burst)."""
@@ -164,13 +428,24 @@ class CentreService:
             out[name[:-2] + "_ms_p99"] = round(float(np.percentile(np.array(d), 99)) * 1000.0, 1) if d else None
         return out
 
-    def _deliver(self, reports, outbox, done_at: float) -> None:
-        """On the loop: the reports of the solved epochs."""
-        if self.on_outbox is not None and outbox:
-            self.on_outbox(outbox)
-        if self.on_epoch is not None:
-            for r in reports:
-                self.on_epoch(r, done_at)
+    def stages_ms(self) -> dict:
+        """Where the correction age goes, over the epochs served to the most sessions (at least half the
+        peak), p50 / p90 / p99 [ms]: the epoch's age when its last station's data reached the caster,
+        when its first group of VRS reached the loop, when the last group was ready in the centre and when
+        it was written to the sockets; then the costs: the centre's synthesis and encoding (wall), their
+        CPU, and the loop's writing to the caster's sinks."""
+        recs = np.array(list(self.timings.stages), float).reshape(-1, 11)
+        if not len(recs):
+            return {}
+        recs = recs[recs[:, 1] >= 0.5 * recs[:, 1].max()]
+        out: dict = {"epochs": int(len(recs)), "sessions": int(recs[:, 1].max()),
+                     "planned_ahead": round(float(np.nanmean(recs[:, 10])), 3) if np.isfinite(recs[:, 10]).any() else None}
+        for k, name in ((2, "station_data"), (4, "vrs_first_on_loop"), (3, "vrs_ready"), (5, "vrs_written"),
+                        (6, "synthesis"), (7, "encoding"), (8, "centre_cpu"), (9, "loop_writing")):
+            d = recs[:, k][np.isfinite(recs[:, k])]
+            if d.size:
+                out[name] = {q: round(float(np.percentile(d, int(q[1:]))) * 1000.0, 1) for q in ("p50", "p90", "p99")}
+        return out
 
     def solve_ms_p99(self) -> float | None:
         if not self.timings.solve_s:
@@ -178,14 +453,152 @@ class CentreService:
         return float(np.percentile(np.array(self.timings.solve_s), 99) * 1000.0)
 
 
+# --- the child process ----------------------------------------------------------------------------------
+
+
+def _child_main(sock: socket.socket, spec: CentreSpec) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C: the parent stops us
+    logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    _CentreWorker(sock, spec).run()
+
+
 class _Collector:
-    """The engine's sink for one session, inside the worker: collects the epoch's bytes for the loop."""
+    """The engine's sink for one session: collects the epoch's bytes for the loop."""
 
-    __slots__ = ("service", "cid")
+    __slots__ = ("batch", "cid")
 
-    def __init__(self, service: CentreService, cid: str):
-        self.service = service
+    def __init__(self, batch: list, cid: str):
+        self.batch = batch
         self.cid = cid
 
     def __call__(self, data: bytes) -> None:
-        self.service._batch.append((self.cid, data))
+        self.batch.append((self.cid, data))
+
+
+class _CentreWorker:
+    """The child's loop: commands in, engine ticks, VRS and reports out."""
+
+    def __init__(self, sock: socket.socket, spec: CentreSpec):
+        from augnet.centre.engine import CentreEngine
+
+        self.sock = sock
+        sock.setblocking(True)
+        stations = {k: np.asarray(v, float) for k, v in spec.stations.items()}
+        self.engine = CentreEngine(stations, spec.t_ref_gpst, network_name=spec.network_name)
+        self.engine.after_serve = self._flush_vrs  # VRS leave as soon as they exist, before the network solve
+        self.engine.serve_group = VRS_GROUP
+        self.batch: list[tuple[str, bytes]] = []
+        self.buf = bytearray()
+        self._inbox: collections.deque = collections.deque()  # commands read, not yet applied
+        self._broken = False
+        self._last_sent = 0.0
+
+    def send(self, msg) -> None:
+        """One message to the loop (the socket's buffer holds an epoch's VRS for thousands of trains, so
+        this returns at once while the loop is still reading the previous group)."""
+        self._last_sent = time.monotonic()
+        data = pickle.dumps(msg, protocol=5)
+        try:
+            self.sock.sendall(_HEAD.pack(len(data)) + data)
+        except OSError:
+            self._broken = True  # the loop side is gone
+
+    def run(self) -> None:
+        try:
+            self.send(("ready", os.getpid()))
+            next_tick = time.monotonic()
+            while not self._broken:
+                timeout = 0.0 if self._inbox else max(0.0, next_tick - time.monotonic())
+                readable = self._read(timeout)
+                while self._inbox:
+                    cmd = self._inbox.popleft()
+                    if cmd[0] == "stop":
+                        return
+                    self._apply(cmd)
+                if readable or time.monotonic() >= next_tick:
+                    self._tick()
+                    if time.monotonic() >= next_tick:
+                        next_tick = time.monotonic() + TICK_S
+                if time.monotonic() - self._last_sent >= HEARTBEAT_S:
+                    self.send(("alive",))
+        except OSError:
+            return
+        finally:
+            self.sock.close()
+
+    def _read(self, timeout: float) -> bool:
+        """Whatever the loop sent within `timeout`, into the inbox (False: nothing came)."""
+        readable, _, _ = select.select([self.sock], [], [], timeout)
+        if not readable:
+            return False
+        chunk = self.sock.recv(_RECV)
+        if not chunk:
+            self._broken = True  # the loop side is gone
+            self._inbox.append(("stop",))
+            return True
+        self.buf += chunk
+        for cmds in _split_frames(self.buf):
+            self._inbox.extend(cmds)
+        return True
+
+    def _await_written(self, t_gpst: float) -> None:
+        """Hold the network solve until the loop has written the epoch's VRS (at most `WRITTEN_WAIT_S`): on
+        two cores the solve would otherwise take one from the loop and the clients while they deliver."""
+        deadline = time.monotonic() + WRITTEN_WAIT_S
+        seen = 0
+        while not self._broken:
+            for i in range(seen, len(self._inbox)):
+                if self._inbox[i][0] == "written" and self._inbox[i][1] == t_gpst:
+                    del self._inbox[i]
+                    return
+            seen = len(self._inbox)
+            left = deadline - time.monotonic()
+            if left <= 0 or not self._read(left):
+                return
+
+    def _apply(self, cmd: tuple) -> None:
+        eng = self.engine
+        try:
+            kind = cmd[0]
+            if kind == "data":
+                eng.feed(cmd[1], cmd[2], cmd[3])
+            elif kind == "open":
+                _, cid, lat, lon, h = cmd
+                eng.open_session(cid, lat, lon, h, _Collector(self.batch, cid))
+            elif kind == "move":
+                eng.move_session(*cmd[1:])
+            elif kind == "close":
+                eng.close_session(cmd[1])
+        except Exception:  # noqa: BLE001 - bad input never stops the centre: reported, then ignored
+            self._error(f"{cmd[0]} failed")
+
+    def _tick(self) -> None:
+        eng = self.engine
+        try:
+            t0 = time.perf_counter()
+            reports = eng.tick(time.time())
+            self._flush_vrs()
+            if not reports:
+                return
+            solve_s = (time.perf_counter() - t0) / len(reports)
+            slim = [dataclasses.replace(r, vrs=None) for r in reports]
+            self.send(("epoch", slim, eng.drain_outbox(), solve_s, len(eng.sessions)))
+            eng.prepare_next()  # the next epoch's VRS but for its observations, while waiting for them
+        except Exception:  # noqa: BLE001 - the centre keeps serving; the error is counted and logged
+            self.batch.clear()
+            self._error("epoch failed")
+
+    def _flush_vrs(self, last: bool = True) -> None:
+        if self.batch:
+            batch = list(self.batch)
+            self.batch.clear()  # the collectors hold this list
+            eng = self.engine
+            t = float(eng.serving_t)
+            self.send(("vrs", t, batch, time.time(), eng.serving_arrival, eng.serve_cost_s, last))
+            if last:
+                self._await_written(t)
+
+    def _error(self, what: str) -> None:
+        text = f"{what}: {traceback.format_exc(limit=8)}"
+        log.error("%s", text)
+        self.send(("error", text))

@@ -7,8 +7,9 @@ epoch arrived: the correction age is that arrival time (host clock, as GPST) min
 (the MSM epoch time, DF004). Every train must receive every epoch of the measured window, each from its
 own virtual station (the RTCM station id of its 1005/1006 is unique to it).
 
-Clients live in several worker processes (one asyncio loop each); the `augnet up` process's CPU (% of
-one core, user + system, over the window) and peak RSS are read with psutil.
+Clients live in several worker processes (one asyncio loop each); the CPU of `augnet up` with its child
+processes (the centre runs in one: % of one core, user + system, over the window) and their peak RSS
+summed are read with psutil.
 """
 
 from __future__ import annotations
@@ -168,6 +169,37 @@ def _worker(trains: list[TrainSpec], line: LinePoints, ctl: Any) -> None:
         asyncio.run(main())
 
 
+def _tree(proc) -> list:
+    if proc is None:
+        return []
+    try:
+        return [proc] + proc.children(recursive=True)
+    except Exception:  # noqa: BLE001 - gone
+        return []
+
+
+def _tree_cpu_s(proc) -> float:
+    """User + system CPU of a process and its live children [s] (a child that exits in the window
+    takes its share with it: the centre's process lives as long as `augnet up`)."""
+    total = 0.0
+    for p in _tree(proc):
+        try:
+            total += sum(p.cpu_times()[:2])
+        except Exception:  # noqa: BLE001 - exited meanwhile
+            pass
+    return total
+
+
+def _tree_rss(proc) -> int:
+    total = 0
+    for p in _tree(proc):
+        try:
+            total += p.memory_info().rss
+        except Exception:  # noqa: BLE001
+            pass
+    return total
+
+
 def run_trains(state: dict, n: int, epochs: int, processes: int, scenario: str, warmup_s: float) -> dict:
     import psutil
 
@@ -201,15 +233,14 @@ def run_trains(state: dict, n: int, epochs: int, processes: int, scenario: str, 
                 statuses[key] = statuses.get(key, 0) + v
         connect_s = time.monotonic() - t_connect
         time.sleep(warmup_s)  # sessions open, the VRS of every train settles into its epoch rhythm
-        cpu0 = sum(up.cpu_times()[:2]) if up else 0.0
+        cpu0 = _tree_cpu_s(up)
         w0 = time.monotonic()
         g0 = gtime.now_gpst()
         rss = 0
         while time.monotonic() - w0 < epochs:
             time.sleep(1.0)
-            if up:
-                rss = max(rss, up.memory_info().rss)
-        cpu1 = sum(up.cpu_times()[:2]) if up else 0.0
+            rss = max(rss, _tree_rss(up))
+        cpu1 = _tree_cpu_s(up)
         window_s = time.monotonic() - w0
         g1 = g0 + window_s
         time.sleep(DRAIN_S)

@@ -27,12 +27,12 @@ from pathlib import Path
 
 import numpy as np
 
-from augnet.centre.engine import SUBJECT_ALARMS, CentreEngine, EpochReport
+from augnet.centre.engine import SUBJECT_ALARMS, EpochReport
 from augnet.gnss import time as gtime
 from augnet.gnss.geometry import ecef_to_geodetic
 from augnet.onboard.trackmap import TrackDatabase
 from augnet.system import persistence
-from augnet.system.centre_service import CentreService
+from augnet.system.centre_service import CentreService, CentreSpec
 from augnet.system.settings import DEFAULT_LIVE_WINDOW_S, START_MARGIN_S, SystemSettings
 from augnet.system.trains import OnboardTrain
 from ntrip_caster.auth import hash_password
@@ -91,7 +91,9 @@ class RunSummary:
     network_epochs: int = 0
     centre_solve_ms_p99: float | None = None
     centre_latency: dict = field(default_factory=dict)
+    centre_stages_ms: dict = field(default_factory=dict)
     centre_errors: int = 0
+    centre_restarts: int = 0
     trains: dict = field(default_factory=dict)
     alarms: list = field(default_factory=list)
     rbc: dict = field(default_factory=dict)
@@ -174,9 +176,10 @@ class System:
 
         enabled = await asyncio.wrap_future(self.writer.submit(seed)) or {}
 
-        # centre
-        engine = CentreEngine(station_xyz, world.t0, network_name=sc.name)
-        self.centre = CentreService(engine, loop, on_epoch=self._on_epoch, on_outbox=self._on_outbox)
+        # centre (its own process, started below once the caster taps are in place)
+        spec = CentreSpec({k: tuple(float(x) for x in v) for k, v in station_xyz.items()}, world.t0, sc.name)
+        self.centre = CentreService(spec, loop, on_epoch=self._on_epoch, on_outbox=self._on_outbox,
+                                    on_alarm=self._alarm)
         for code, on in enabled.items():
             if not on:
                 self.centre.set_station_enabled(code, False)
@@ -201,7 +204,7 @@ class System:
         port = await self.caster.start()
         for rx in stations:
             self.caster.tap(rx.id, lambda data, code=rx.id: self.centre.feed(code, data))
-        self.centre.start()
+        await self.centre.start()
 
         # bus
         from augnet.bus import open_bus
@@ -399,7 +402,7 @@ class System:
             "epoch_gpst": r.t_gpst, "epoch_utc": gtime.to_datetime(r.t_gpst).isoformat(), "master": ne.master,
             "stations_present": len(ne.present), "stations": len(ne.stations), "satellites": int(len(ne.sats)),
             "excluded": sorted(ne.excluded), "sessions": r.sessions,
-            "vrs_model": _model_names(r), "misclosures": ne.misclosures,
+            "vrs_model": r.vrs_models, "misclosures": ne.misclosures,
             "correction_age_p99_s": float(np.nanpercentile(ages, 99)),
             "solve_ms_p99": self.centre.solve_ms_p99(), **self.centre.latency_ms_p99(), "rbc": self.rbc.snapshot() if self.rbc else None,
             "updated_unix": now,
@@ -454,7 +457,7 @@ class System:
             except Exception:  # noqa: BLE001
                 continue
             for code, on in (enabled or {}).items():
-                if code in self.centre.engine.stations:
+                if code in self.centre.stations:
                     self.centre.set_station_enabled(code, on)
 
     async def run(self, duration_s: float | None = None) -> RunSummary:
@@ -489,7 +492,7 @@ class System:
         if self.rbc is not None:
             await self.rbc.stop()
         if self.centre is not None:
-            self.centre.stop()
+            await self.centre.stop()
         if self.caster is not None:
             await self.caster.stop()
         if self.bus is not None:
@@ -504,12 +507,14 @@ class System:
         out = RunSummary(scenario=self.settings.scenario,
                          started_utc=dt.datetime.fromtimestamp(self.started, dt.timezone.utc).isoformat(),
                          duration_s=round(time.time() - self.started, 1),
-                         stations=sorted(self.centre.engine.stations) if self.centre else [])
+                         stations=sorted(self.centre.stations) if self.centre else [])
         if self.centre is not None:
             out.network_epochs = self.centre.timings.epochs
             out.centre_solve_ms_p99 = self.centre.solve_ms_p99()
             out.centre_latency = self.centre.latency_ms_p99()
+            out.centre_stages_ms = self.centre.stages_ms()
             out.centre_errors = self.centre.errors
+            out.centre_restarts = self.centre.restarts
         for tid, tr in self.trains.items():
             lat = np.array(tr.stats.correction_latency_s) if tr.stats.correction_latency_s else np.array([np.nan])
             n = max(1, tr.stats.epochs)
@@ -542,14 +547,6 @@ def _fixed_residual_rms_m(b) -> float | None:
 def _pct(a: np.ndarray, q: float) -> float | None:
     a = a[np.isfinite(a)]
     return round(float(np.percentile(a, q)), 3) if a.size else None
-
-
-def _model_names(r: EpochReport) -> dict[str, int]:
-    if r.vrs is None:
-        return {}
-    from augnet.centre.interpolation import MODEL_NAMES as names
-    vals, counts = np.unique(r.vrs.model, return_counts=True)
-    return {names.get(int(v), str(v)): int(c) for v, c in zip(vals, counts)}
 
 
 __all__ = ["System", "SystemSettings", "RunSummary", "scenario_for_run", "SUBJECT_ALARMS"]

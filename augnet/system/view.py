@@ -34,7 +34,7 @@ def render(system) -> Group:
         st.add_column(c)
     present = set(r.network.present) if r else set()
     excluded = system.centre.excluded_stations if system.centre else set()
-    for code in sorted(system.centre.engine.stations if system.centre else []):
+    for code in sorted(system.centre.stations if system.centre else []):
         state = "[dim]disabled[/dim]" if code in excluded else ("[green]up[/green]" if code in present else "[red]down[/red]")
         km = system.station_km.get(code)
         st.add_row(code, state, f"{km:.1f}" if km is not None else "-")

@@ -1,0 +1,194 @@
+"""The centre service of `augnet up`: the engine in its own process behind the caster's stream-factory
+interface. Station bytes in, each session's VRS out through its sink, moves and closes obeyed; a centre
+process that dies is reported and replaced; shutdown leaves no process behind; bad input is survived."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+
+import numpy as np
+import pytest
+
+from augnet.centre.ingest import StationDecoder
+from augnet.gnss.geometry import ecef_to_geodetic
+from augnet.system.centre_service import CentreService, CentreSpec
+from ntrip_caster.gga import GgaFix
+from ntrip_caster.stream_factory import StreamFactory
+from stations.rtcm_stream import RtcmStreams
+from stations.scenario import load_scenario
+from stations.world import World
+
+EPOCHS = 12
+
+
+@pytest.fixture(scope="module")
+def recorded():
+    world = World(load_scenario("network-70km").model_copy(update={"duration_s": EPOCHS}))
+    streams = RtcmStreams(world)
+    streams.keep_epochs = True
+    for blk in world.epochs():
+        streams.add(blk)
+    stations = {r.id: r.ecef[0] for r in world.receivers if not r.id.startswith("check")}
+    return world, streams, stations
+
+
+def _fix(ecef) -> GgaFix:
+    lat, lon, h = ecef_to_geodetic(np.asarray(ecef, float))
+    return GgaFix(float(np.degrees(lat)), float(np.degrees(lon)), float(h), 1, 12, "GN", b"")
+
+
+async def _until(cond, timeout: float = 30.0) -> None:
+    t0 = time.monotonic()
+    while not cond():
+        if time.monotonic() - t0 > timeout:
+            raise AssertionError("timed out")
+        await asyncio.sleep(0.02)
+
+
+def _service(world, stations, **kw) -> tuple[CentreService, list, list]:
+    epochs, alarms = [], []
+    spec = CentreSpec({k: tuple(map(float, v)) for k, v in stations.items()}, world.t0, "test")
+    svc = CentreService(spec, asyncio.get_running_loop(), on_epoch=lambda r, at: epochs.append(r),
+                        on_alarm=lambda *a: alarms.append(a), **kw)
+    return svc, epochs, alarms
+
+
+async def _feed(svc, streams, stations, epochs_range, pause: float = 0.0) -> None:
+    for e in epochs_range:
+        for name in stations:
+            svc.feed(name, streams.epoch_bytes[name][e][1])
+        await asyncio.sleep(pause)
+
+
+def test_a_session_gets_its_vrs_moves_and_closes(recorded):
+    world, streams, stations = recorded
+    check = world.receivers[world.receiver_ids.index("check1")].ecef[0]
+    west = stations["WEST"]
+
+    async def main():
+        svc, epochs, alarms = _service(world, stations)
+        assert isinstance(svc, StreamFactory) and sorted(svc.stations) == sorted(stations)
+        await svc.start()
+        got = bytearray()
+        handle = svc.open("VRS/1", "VRS", _fix(check), got.extend)
+        await _feed(svc, streams, stations, range(0, 6), 0.05)
+        await _until(lambda: len(epochs) >= 5)
+        dec = StationDecoder("VRS", world.t0)
+        first = dec.feed(bytes(got))
+        assert first and np.linalg.norm(dec.arp_ecef - check) < 0.01  # its own VRS at its own point
+        # the train moves: the next epochs come from the new point
+        moved = 0.5 * (check + west)
+        handle.update_position(_fix(moved))
+        n = len(got)
+        await _feed(svc, streams, stations, range(6, 9), 0.05)
+        await _until(lambda: len(epochs) >= 8)
+        dec2 = StationDecoder("VRS", world.t0)
+        assert dec2.feed(bytes(got[n:])) and np.linalg.norm(dec2.arp_ecef - moved) < 0.01
+        # closed: nothing more reaches its sink
+        handle.close()
+        await asyncio.sleep(0.2)
+        n = len(got)
+        await _feed(svc, streams, stations, range(9, EPOCHS), 0.05)
+        await _until(lambda: len(epochs) >= EPOCHS - 1)
+        assert len(got) == n
+        # what the loop side keeps for the console and the run report
+        r = epochs[-1]
+        assert r.network.present and set(r.network.present) <= set(stations) and r.arrival is not None
+        assert svc.timings.epochs == len(epochs) and svc.errors == 0 and not alarms
+        assert svc.latency_ms_p99()["vrs_ready_ms_p99"] is not None and svc.stages_ms()["sessions"] == 1
+        proc = svc._proc
+        await svc.stop()
+        assert not proc.is_alive() and proc.exitcode == 0  # stopped by its message, not killed
+
+    asyncio.run(main())
+
+
+def test_bad_input_is_survived_and_a_disabled_station_is_not_fed(recorded):
+    world, streams, stations = recorded
+
+    async def main():
+        svc, epochs, alarms = _service(world, stations)
+        await svc.start()
+        svc.feed("NOSUCH", b"\xd3\x00\x13garbage")  # unknown station
+        svc.feed("WEST", b"\xd3\x03\xff" + bytes(range(256)) * 4)  # garbage in a known station's stream
+        svc._send(("move", "never-opened", 0.0, 0.0, 0.0))
+        svc._send(("open", "bad", "not a latitude", None, None))  # the engine refuses it; the centre goes on
+        svc.set_station_enabled("WEST", False)
+        await _feed(svc, streams, stations, range(0, 4), 0.05)
+        await _until(lambda: len(epochs) >= 3)
+        assert svc.alive and "WEST" not in epochs[-1].network.present and "EAST" in epochs[-1].network.present
+        assert svc.errors >= 1  # the refused session was reported
+        await svc.stop()
+
+    asyncio.run(main())
+
+
+def test_a_dead_centre_is_reported_and_replaced_and_stop_leaves_no_process(recorded):
+    world, streams, stations = recorded
+    check = world.receivers[world.receiver_ids.index("check1")].ecef[0]
+
+    async def main():
+        svc, epochs, alarms = _service(world, stations)
+        await svc.start()
+        got = bytearray()
+        svc.open("VRS/1", "VRS", _fix(check), got.extend)
+        await _until(lambda: svc.alive)
+        first = svc._proc
+        first.kill()
+        await _until(lambda: alarms)
+        kind, subject, severity, message, cleared = alarms[0]
+        assert (kind, severity, cleared) == ("centre-process", "critical", False) and "died" in message
+        assert svc.errors == 1
+        await _until(lambda: svc.alive and svc._proc is not first)
+        # the new centre serves the session the caster still has
+        await _feed(svc, streams, stations, range(0, 5), 0.05)
+        await _until(lambda: len(epochs) >= 4 and len(got) > 0)
+        assert alarms[-1][4] is True  # cleared by the new centre's first epoch
+        second = svc._proc
+        await svc.stop()
+        assert not first.is_alive() and not second.is_alive() and svc.restarts == 1
+
+    asyncio.run(main())
+
+
+def test_stop_kills_a_centre_that_does_not_answer(recorded):
+    world, _, stations = recorded
+
+    async def main():
+        import os
+        import signal
+
+        svc, _, alarms = _service(world, stations)
+        await svc.start()
+        await _until(lambda: svc.alive)
+        os.kill(svc.pid, signal.SIGSTOP)  # hung: it will not read its "stop"
+        t0 = time.monotonic()
+        await svc.stop(timeout=0.5)
+        assert not svc._proc.is_alive() and time.monotonic() - t0 < 10
+        assert not alarms  # a stop is not a crash
+
+    asyncio.run(main())
+
+
+def test_a_centre_that_stops_answering_is_killed_reported_and_replaced(recorded):
+    world, streams, stations = recorded
+
+    async def main():
+        import os
+        import signal
+
+        svc, epochs, alarms = _service(world, stations, hang_s=2.0)
+        await svc.start()
+        await _until(lambda: svc.alive)
+        first = svc._proc
+        os.kill(first.pid, signal.SIGSTOP)  # alive, but silent
+        await _until(lambda: alarms, timeout=20)
+        assert alarms[0][0] == "centre-process" and alarms[0][4] is False
+        await _until(lambda: svc.alive and svc._proc is not first, timeout=20)
+        assert not first.is_alive() and svc.restarts == 1
+        await _feed(svc, streams, stations, range(0, 3), 0.05)
+        await _until(lambda: len(epochs) >= 2)
+        await svc.stop()
+
+    asyncio.run(main())
