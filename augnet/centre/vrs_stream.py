@@ -54,6 +54,19 @@ class Client:
     descriptor_frame: bytes = b""  # framed 1033 (the station id's: encoded once)
 
 
+@dataclass
+class _EpochContext:
+    sats: np.ndarray
+    codes: np.ndarray
+    nav: NavigationData
+    t: float
+    eph_rows: np.ndarray = None
+    gsat: np.ndarray = None
+    sendable: np.ndarray = None
+    systems: list = field(default_factory=list)
+    msm: dict = field(default_factory=dict)  # system -> (columns, PRNs, codes, MSM signal ids, cells)
+
+
 class VrsStreamEncoder:
     def __init__(self, msm_level: int = 7):
         self.level = msm_level
@@ -71,6 +84,7 @@ class VrsStreamEncoder:
         # correction source (network <-> the master's plain shift) steps the VRS phase by the residual
         # atmosphere, cm, without a slip at the master, so the lock restarts and the rover knows
         self._corrected = np.full((0, 0), np.nan)
+        self._ctx: _EpochContext | None = None
 
     def _grow(self, rows: int, keys: int) -> None:
         r0, k0 = self._lock_t0.shape
@@ -148,20 +162,20 @@ class VrsStreamEncoder:
     def encode(self, ids: list[str], vrs: VrsEpoch, nav: NavigationData) -> dict[str, bytes]:
         """The epoch's RTCM bytes for each client in `ids` (rows of `vrs` in the same order)."""
         t = vrs.t_gpst
+        ctx = self._context(vrs, nav)
         out = {cid: bytearray() for cid in ids}
         # station and ephemeris messages: per client, only when due (a few per client per minute)
-        eph_rows = nav.select(list(vrs.sats), t)
+        eph_rows = ctx.eph_rows
         if len(self._eph_frames) > 4096:  # a long run: forget frames of old sets
             self._eph_frames.clear()
         have_all = np.isfinite(vrs.code_m).any(axis=2)  # (T, S)
-        gsat = np.array([self._sat_index(str(x)) for x in vrs.sats], dtype=int)
+        gsat = ctx.gsat
         rows_c = np.array([self.clients[c].row for c in ids], dtype=int)
         self._grow_eph(rows_c.max(initial=0) + 1, len(self._sat_ids))
         sent = self._eph_sent[np.ix_(rows_c, gsat)]  # (T, S) ephemeris row each client last had
         last_eph = np.array([self.clients[c].last_eph for c in ids])
         periodic = (t - last_eph) >= EPHEMERIS_INTERVAL_S
-        sendable = (eph_rows >= 0) & np.isin(np.array([str(x)[0] for x in vrs.sats]), list("GEC"))
-        due = have_all & sendable[None, :] & (periodic[:, None] | (sent != eph_rows[None, :]))
+        due = have_all & ctx.sendable[None, :] & (periodic[:, None] | (sent != eph_rows[None, :]))
         self._eph_sent[np.ix_(rows_c, gsat)] = np.where(due, eph_rows[None, :], sent)
         for i, cid in enumerate(ids):
             c = self.clients[cid]
@@ -183,10 +197,9 @@ class VrsStreamEncoder:
                 blob = blobs[key] = b"".join(self._eph_frame(int(eph_rows[k]), nav) for k in np.flatnonzero(due[i]))
             out[ids[i]] += blob
         # MSM per system, batched over clients
-        systems = [s for s in SYSTEM_ORDER if any(str(x).startswith(s) for x in vrs.sats)]
         batches = []
-        for j, system in enumerate(systems):
-            batches += self._msm(system, ids, vrs, final=j == len(systems) - 1)
+        for j, system in enumerate(ctx.systems):
+            batches += self._msm(ctx.msm[system], system, ids, vrs, final=j == len(ctx.systems) - 1)
         # each batch holds one frame per client back to back: slice them out by offsets
         views = [(memoryview(b.data), b.offsets) for b in batches]
         for i, cid in enumerate(ids):
@@ -195,17 +208,42 @@ class VrsStreamEncoder:
                 buf += data[off[i]:off[i + 1]]
         return {cid: bytes(b) for cid, b in out.items()}
 
-    def _msm(self, system: str, ids: list[str], vrs: VrsEpoch, final: bool):
+    def _context(self, vrs: VrsEpoch, nav: NavigationData) -> "_EpochContext":
+        """What the epoch's encoding needs that does not depend on the clients: worked out once for all the
+        groups of clients an epoch is encoded in (`VrsEpoch.rows` of one epoch share `sats` and `codes`)."""
+        ctx = self._ctx
+        if ctx is not None and ctx.sats is vrs.sats and ctx.codes is vrs.codes and ctx.nav is nav \
+                and ctx.t == vrs.t_gpst:
+            return ctx
+        ctx = _EpochContext(vrs.sats, vrs.codes, nav, vrs.t_gpst)
+        ctx.eph_rows = nav.select(list(vrs.sats), vrs.t_gpst)
+        ctx.gsat = np.array([self._sat_index(str(x)) for x in vrs.sats], dtype=int)
+        ctx.sendable = (ctx.eph_rows >= 0) & np.isin(np.array([str(x)[0] for x in vrs.sats]), list("GEC"))
+        ctx.systems = [s for s in SYSTEM_ORDER if any(str(x).startswith(s) for x in vrs.sats)]
+        for system in ctx.systems:
+            cols = np.flatnonzero(np.char.startswith(vrs.sats.astype(str), system))
+            sats = vrs.sats[cols]
+            codes = [c for c in dict.fromkeys(vrs.codes[cols].ravel().tolist()) if c]
+            sig_ids = np.array([by_rinex(system, c).msm_id for c in codes])
+            order = np.argsort(sig_ids)
+            codes = [codes[i] for i in order]
+            cells = []  # (slot, signal column, satellite rows, their columns in vrs, lock-state keys, wavelengths)
+            for slot in range(2):
+                code_of = vrs.codes[cols, slot]
+                for j, c in enumerate(codes):
+                    rows = np.flatnonzero(code_of == c)
+                    if rows.size:
+                        keys = np.array([self._key(str(sats[k]), c) for k in rows])
+                        cells.append((slot, j, rows, cols[rows], keys,
+                                      SPEED_OF_LIGHT_M_S / vrs.freq_hz[cols[rows], slot]))
+            ctx.msm[system] = (cols, np.array([int(s[1:]) for s in sats]), codes, sig_ids[order], cells)
+        self._ctx = ctx
+        return ctx
+
+    def _msm(self, plan, system: str, ids: list[str], vrs: VrsEpoch, final: bool):
         """This system's MSM for every client, as batches (one per group of satellites when the cells
         exceed one message); the multiple-message bit is clear only on the epoch's very last message."""
-        cols = np.flatnonzero(np.char.startswith(vrs.sats.astype(str), system))
-        sats = vrs.sats[cols]
-        prn = np.array([int(s[1:]) for s in sats])
-        codes = [c for c in dict.fromkeys(vrs.codes[cols].ravel().tolist()) if c]
-        sig_ids = np.array([by_rinex(system, c).msm_id for c in codes])
-        order = np.argsort(sig_ids)
-        codes = [codes[i] for i in order]
-        sig_ids = sig_ids[order]
+        cols, prn, codes, sig_ids, cells = plan
         T = len(ids)
         nsat, nsig = len(cols), len(codes)
         pr = np.full((T, nsat, nsig), np.nan)
@@ -214,33 +252,26 @@ class VrsStreamEncoder:
         lock_ms = np.zeros((T, nsat, nsig))
         t = vrs.t_gpst
         rows_c = np.array([self.clients[c].row for c in ids], dtype=int)
-        for slot in range(2):
-            code_of = vrs.codes[cols, slot]
-            for j, c in enumerate(codes):
-                rows = np.flatnonzero(code_of == c)
-                if rows.size == 0:
-                    continue
-                pr[:, rows, j] = vrs.code_m[:, cols[rows], slot]
-                cp[:, rows, j] = vrs.phase_cyc[:, cols[rows], slot]
-                cnr[:, rows, j] = vrs.cnr_dbhz[:, cols[rows], slot]
-                keys = np.array([self._key(str(sats[k]), c) for k in rows])
-                self._grow(rows_c.max(initial=0) + 1, len(self._keys))
-                t0 = self._lock_t0[np.ix_(rows_c, keys)]
-                off = self._offset[np.ix_(rows_c, keys)]
-                have = np.isfinite(cp[:, rows, j])
-                corr_now = vrs.corrected[:, cols[rows]].astype(float)
-                corr_before = self._corrected[np.ix_(rows_c, keys)]
-                switched = np.isfinite(corr_before) & (corr_before != corr_now)
-                self._corrected[np.ix_(rows_c, keys)] = np.where(have, corr_now, np.nan)
-                restart = have & (np.isnan(t0) | ((vrs.lli[:, cols[rows], slot] & 1) != 0) | switched)
-                lam = SPEED_OF_LIGHT_M_S / vrs.freq_hz[cols[rows], slot]
-                new_off = phase_offset_cycles(pr[:, rows, j], cp[:, rows, j], lam[None, :])
-                t0 = np.where(restart, t, np.where(have, t0, np.nan))
-                off = np.where(restart, new_off, off)
-                self._lock_t0[np.ix_(rows_c, keys)] = t0
-                self._offset[np.ix_(rows_c, keys)] = off
-                cp[:, rows, j] -= off
-                lock_ms[:, rows, j] = np.where(have, (t - t0) * 1000.0, 0.0)
+        self._grow(rows_c.max(initial=0) + 1, len(self._keys))
+        for slot, j, rows, vcols, keys, lam in cells:
+            pr[:, rows, j] = vrs.code_m[:, vcols, slot]
+            cp[:, rows, j] = vrs.phase_cyc[:, vcols, slot]
+            cnr[:, rows, j] = vrs.cnr_dbhz[:, vcols, slot]
+            t0 = self._lock_t0[np.ix_(rows_c, keys)]
+            off = self._offset[np.ix_(rows_c, keys)]
+            have = np.isfinite(cp[:, rows, j])
+            corr_now = vrs.corrected[:, vcols].astype(float)
+            corr_before = self._corrected[np.ix_(rows_c, keys)]
+            switched = np.isfinite(corr_before) & (corr_before != corr_now)
+            self._corrected[np.ix_(rows_c, keys)] = np.where(have, corr_now, np.nan)
+            restart = have & (np.isnan(t0) | ((vrs.lli[:, vcols, slot] & 1) != 0) | switched)
+            new_off = phase_offset_cycles(pr[:, rows, j], cp[:, rows, j], lam[None, :])
+            t0 = np.where(restart, t, np.where(have, t0, np.nan))
+            off = np.where(restart, new_off, off)
+            self._lock_t0[np.ix_(rows_c, keys)] = t0
+            self._offset[np.ix_(rows_c, keys)] = off
+            cp[:, rows, j] -= off
+            lock_ms[:, rows, j] = np.where(have, (t - t0) * 1000.0, 0.0)
         station_ids = np.array([self.clients[c].station_id for c in ids])
         epoch = msm_epoch_ms(system, t)
         per_client = nsat * nsig

@@ -119,12 +119,14 @@ def _split_frames(buf: bytearray) -> list:
     out = []
     pos = 0
     n = len(buf)
-    while n - pos >= 4:
-        size = _HEAD.unpack_from(buf, pos)[0]
-        if n - pos - 4 < size:
-            break
-        out.append(pickle.loads(memoryview(buf)[pos + 4:pos + 4 + size]))
-        pos += 4 + size
+    with memoryview(buf) as view:  # released before `buf` is cut
+        while n - pos >= 4:
+            size = _HEAD.unpack_from(view, pos)[0]
+            if n - pos - 4 < size:
+                break
+            with view[pos + 4:pos + 4 + size] as part:
+                out.append(pickle.loads(part))
+            pos += 4 + size
     if pos:
         del buf[:pos]
     return out

@@ -3,9 +3,9 @@
 Each train is an NTRIP client (half NTRIP 1, half NTRIP 2, Basic authentication with the run's train
 credentials from its state file) that uploads a GGA sentence moving along the scenario's line at its own
 speed, and receives its own VRS stream. Per train and epoch the client notes when the first MSM of the
-epoch arrived: the correction age is that arrival time (host clock, as GPST) minus the epoch's GPS time
-(the MSM epoch time, DF004). Every train must receive every epoch of the measured window, each from its
-own virtual station (the RTCM station id of its 1005/1006 is unique to it).
+epoch arrived: the correction age is that arrival time (host clock when the bytes were read, as GPST)
+minus the epoch's GPS time (the MSM epoch time, DF004). Every train must receive every epoch of the
+measured window, each from its own virtual station (the RTCM station id of its 1005/1006 is unique to it).
 
 Clients live in several worker processes (one asyncio loop each); the CPU of `augnet up` with its child
 processes (the centre runs in one: % of one core, user + system, over the window) and their peak RSS
@@ -57,8 +57,10 @@ class TrainClient(LoadClient):
         self.ages_ms: dict[int, float] = {}  # GPS epoch time [ms of week] -> correction age [ms]
         self.station_ids: set[int] = set()
         self.t0 = time.monotonic()
+        # `now` of a frame is the monotonic clock when its bytes arrived (data_received): as GPST
+        self.gps_minus_monotonic_s = gtime.now_gpst() - time.monotonic()
 
-    def _frame(self, frame: bytes, now: int) -> None:  # noqa: ARG002 - host clock read below, as GPST
+    def _frame(self, frame: bytes, now: int) -> None:
         if len(frame) < 12:
             self.bad += 1
             return
@@ -67,7 +69,7 @@ class TrainClient(LoadClient):
             # payload bits 0-11 type, 12-23 station id, 24-53 GPS epoch time [ms] (DF004)
             tow_ms = ((frame[6] << 22) | (frame[7] << 14) | (frame[8] << 6) | (frame[9] >> 2)) & 0x3FFFFFFF
             if tow_ms not in self.ages_ms:
-                now_gpst = gtime.now_gpst()
+                now_gpst = now * 1e-9 + self.gps_minus_monotonic_s
                 _, tow_now = gtime.week_tow(now_gpst)
                 age = (float(tow_now) * 1000.0 - tow_ms) % (7 * 86400 * 1000)
                 self.ages_ms[tow_ms] = age

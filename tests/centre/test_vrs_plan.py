@@ -84,3 +84,47 @@ def test_a_plan_that_does_not_fit_is_not_used(solved):
     for plan in (wrong_epoch, missing_station):
         assert not plan.fits(ne, world.nav, ne.t_gpst + 1.0, list(now), None)
         _same(synthesize(ne, now, pts, world.nav, plan=plan, keys=keys), spot)
+
+
+def test_the_engine_planning_ahead_and_serving_in_groups_sends_the_same_bytes():
+    """What the centre process does (plan each next epoch after the solve, encode the sessions a group
+    at a time) changes when the work is done, not one byte of any session's stream."""
+    from augnet.centre.engine import CentreEngine
+    from augnet.gnss.geometry import ecef_to_geodetic
+    from stations.rtcm_stream import RtcmStreams
+
+    n = 25
+    world = World(load_scenario("network-70km").model_copy(update={"duration_s": n}))
+    streams = RtcmStreams(world)
+    streams.keep_epochs = True
+    for blk in world.epochs():
+        streams.add(blk)
+    stations = {r.id: r.ecef[0] for r in world.receivers if not r.id.startswith("check")}
+    pts = _points(9)
+    out = []
+    for planned in (False, True):
+        eng = CentreEngine(stations, world.t0, network_name="t")
+        eng.serve_group = 4 if planned else None
+        groups = []
+        eng.after_serve = groups.append
+        got = {i: bytearray() for i in range(len(pts))}
+        for i, p in enumerate(pts):
+            lat, lon, h = ecef_to_geodetic(p)
+            eng.open_session(f"c{i}", np.degrees(lat), np.degrees(lon), h, got[i].extend)
+        for e in range(n):
+            if e == 12:  # a train moves, one leaves, one arrives
+                lat, lon, h = ecef_to_geodetic(pts[0] + [2000.0, 0.0, 0.0])
+                eng.move_session("c0", np.degrees(lat), np.degrees(lon), h)
+                eng.close_session("c5")
+                lat, lon, h = ecef_to_geodetic(pts[5])
+                eng.open_session("c9", np.degrees(lat), np.degrees(lon), h, got.setdefault(9, bytearray()).extend)
+            for name in stations:
+                eng.feed(name, streams.epoch_bytes[name][e][1], float(e))
+            eng.tick(e + 1.0)
+            if planned:
+                eng.prepare_next()
+        if planned:
+            assert groups.count(True) == n and groups.count(False) == 2 * n  # 3 groups an epoch, the last True
+            assert eng.last.vrs.flags["planned"]  # the plan made after the solve was the one used
+        out.append({k: bytes(v) for k, v in got.items()})
+    assert out[0] == out[1] and all(len(v) > 1000 for v in out[0].values())
