@@ -1,5 +1,5 @@
-"""`augnet scenario run SCENARIO --out DIR [--duration S]`: the whole chain faster than real time, a progress
-bar while it runs, then the targets as a table; report.json, epochs.csv and the PNG plots in DIR."""
+"""`augnet scenario run SCENARIO --out DIR [--duration S] [--warm-up S]`: the whole chain faster than real time,
+a progress bar while it runs, then the targets as a table; report.json, epochs.csv and the PNG plots in DIR."""
 
 from __future__ import annotations
 
@@ -44,6 +44,9 @@ def run_cmd(scenario: str = typer.Argument(..., help="built-in name (demo, basel
             duration: Optional[float] = typer.Option(None, "--duration", help="simulate only the first S seconds"),
             alert_limit: Optional[float] = typer.Option(None, "--alert-limit",
                                                         help="horizontal alert limit for the Stanford plot [m]"),
+            warm_up: Optional[float] = typer.Option(
+                None, "--warm-up", help="seconds the stations and the centre run before the trains' time 0 "
+                                        "(default 300 with trains, 0 without; 0: a cold centre)"),
             no_plots: bool = typer.Option(False, "--no-plots", help="report.json and epochs.csv only"),
             strict: bool = typer.Option(False, "--strict", help="exit 1 when a target is not met"),
             quiet: bool = typer.Option(False, "--quiet", help="no progress bar")) -> None:
@@ -53,13 +56,14 @@ def run_cmd(scenario: str = typer.Argument(..., help="built-in name (demo, basel
     console = Console()
     try:
         rep = run(scenario, out, duration_s=duration, progress=not quiet, plots=not no_plots,
-                  alert_limit_m=alert_limit)
+                  alert_limit_m=alert_limit, warm_up_s=warm_up)
     except ScenarioError as exc:
         console.print(f"[red]error:[/red] {exc}")
         raise typer.Exit(2) from None
     console.print(targets_table(rep))
     r = rep.run
-    console.print(f"{r['epochs']} epochs in {r['wall_s']:.1f} s ({_fmt(r['real_time_factor'])}x real time); "
+    warm = f" after a {_fmt(r['warm_up_s'])} s warm-up of the stations and the centre" if r["warm_up_s"] else ""
+    console.print(f"{r['epochs']} epochs{warm} in {r['wall_s']:.1f} s ({_fmt(r['real_time_factor'])}x real time); "
                   f"wrote {', '.join(rep.files)} to {out}")
     if strict and not rep.passed:
         raise typer.Exit(1)

@@ -5,7 +5,8 @@ the issue's targets with measured value and pass/fail. Written as `report.json` 
 report.json (version "augnet-scenario-report/1"); times in seconds since the scenario start, lengths in m:
 
     version, scenario {name, seed, start, duration_s, rate_hz, ionosphere, stations, check_points, trains},
-    run {epochs, network_epochs, wall_s, real_time_factor}, latency_model {...}, definitions {...},
+    run {epochs, warm_up_s, centre_start_s, world_epochs, network_epochs, wall_s, real_time_factor},
+    latency_model {...}, definitions {...},
     trains {<id>: {epochs, epochs_without_sky, status_counts, session_opened_s, vrs_moves, gga_sent, vrs_masters,
                    vrs_master_changes [{t_s, from, to}],
                    corrections_usable_s, first_fix_s, ttff_s, acquisitions [...], acquisition_time_median_s,
@@ -19,8 +20,9 @@ report.json (version "augnet-scenario-report/1"); times in seconds since the sce
                    protection_level {integrity_risk, k, alert_limit_m, hpl_m, vpl_m, h_error_over_hpl,
                                      v_error_over_vpl, misleading, hazardously_misleading, unavailable},
                    correction_age_s {n, p50, p95, max, over_limit, limit_s, epochs_without}}},
-    baselines {<name>: {station_a, station_b, length_km, first_fix_s, fixed_fraction_mean,
-                        arcs, arcs_fixed, arc_time_to_fix_s {median, p75}, checked, wrong_fixes, wrong_examples}},
+    baselines {<name>: {station_a, station_b, length_km, first_fix_s (since the centre's start),
+                        fixed_fraction_mean, arcs, arcs_fixed, arc_time_to_fix_s {median, p75}, checked,
+                        wrong_fixes, wrong_examples}},
     network {arcs, arcs_fixed, arc_time_to_fix_median_s, checked, wrong_fixes},
     interpolation {dd_iono_error_m {n, p50, p95, rms, max}, dd_iono_error_from_truth_residuals_m {...},
                    points {<id>: {network {...}, from_truth_residuals {...}}}},
@@ -303,9 +305,10 @@ def balise_figures(log, tl, t: np.ndarray, sky: np.ndarray) -> dict:
     return out
 
 
-def baseline_figures(bl) -> dict:
+def baseline_figures(bl, warm_up_s: float = 0.0) -> dict:
+    """One baseline's figures; `first_fix_s` since the centre's start (`warm_up_s` before the scenario's)."""
     ff = np.array(bl.fixed_fraction, float)
-    ts = np.array(bl.t_s, float)
+    ts = np.array(bl.t_s, float) + warm_up_s
     first = np.flatnonzero(ff >= 0.5)
     ttf = np.array(list(bl.time_to_fix.values()), float)
     return {"station_a": bl.station_a, "station_b": bl.station_b, "length_km": bl.length_m / 1000.0,
@@ -381,7 +384,7 @@ def build(log, alert_limit_m: float = DEFAULT_ALERT_LIMIT_M) -> Report:
     for tid, tl in log.trains.items():
         trains[tid], series[tid] = train_figures(log, tl, alert_limit_m)
     log.series = series  # for the plots
-    baselines = {name: baseline_figures(bl) for name, bl in log.baselines.items()}
+    baselines = {name: baseline_figures(bl, log.warm_up_s) for name, bl in log.baselines.items()}
     all_ttf = [x for bl in log.baselines.values() for x in bl.time_to_fix.values()]
     network = {"arcs": sum(b["arcs"] for b in baselines.values()),
                "arcs_fixed": sum(b["arcs_fixed"] for b in baselines.values()),
@@ -403,12 +406,19 @@ def build(log, alert_limit_m: float = DEFAULT_ALERT_LIMIT_M) -> Report:
                 "stations": sorted(log.stations), "check_points": sorted(log.check_points),
                 "trains": [{"id": x.id, "track": x.track, "start_km": x.start_km, "direction": x.direction,
                             "speed_kmh": x.speed_kmh} for x in sc.trains]}
-    duration = sc.n_epochs * sc.interval_s
-    run = {"epochs": log.epochs, "network_epochs": log.network_epochs, "wall_s": log.wall_s,
-           "real_time_factor": duration / log.wall_s if log.wall_s > 0 else None}
+    simulated = sc.n_epochs * sc.interval_s + log.warm_up_s
+    run = {"epochs": log.epochs, "warm_up_s": log.warm_up_s,
+           "centre_start_s": -log.warm_up_s if log.warm_up_s else 0.0,  # on the scenario's clock
+           "world_epochs": log.world_epochs, "network_epochs": log.network_epochs, "wall_s": log.wall_s,
+           "real_time_factor": simulated / log.wall_s if log.wall_s > 0 else None}
     definitions = {"wrong_fix_error_m": M.WRONG_FIX_ERROR_M, "min_rtk_satellites": log.min_rtk_satellites,
                    "no_sky": "epochs where the train receiver tracks no satellite (tunnel, under a bridge); left out "
                              "of fix_rate_after_first_fix, counted in fix_rate_after_first_fix_incl_no_sky",
+                   "warm_up": "the reference stations and the centre start run.warm_up_s before the scenario's "
+                              "start, the trains' time 0 (they switch on into a network in service); 0: centre and "
+                              "trains start together",
+                   "baseline_first_fix": "first epoch with half of the baseline's satellites fixed, in seconds since "
+                                         "the centre's (cold) start",
                    "ttff": "from the first epoch whose VRS carries min_rtk_satellites to the first fixed epoch",
                    "accuracy": "absolute errors of fixed epochs against the truth antenna position",
                    "protection_level": "K sigma, K two-sided Gaussian quantile of integrity_risk",

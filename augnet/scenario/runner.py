@@ -16,6 +16,14 @@ point (Wanninger's semi-kinematic VRS): the onboard filter takes the new coordin
 ambiguities (`move_base`); a new master restarts every lock time in the stream, which the rover's slip
 detection sees. A new VRS station id (a new session) restarts the filter.
 
+Warm-up: the reference stations and the centre start `warm_up_s` (default `DEFAULT_WARM_UP_S` when the scenario
+has trains) before the scenario's start, its trains' time 0; the trains' receivers and onboard units are
+switched on at time 0. That is how a train meets the network in service: the centre runs for months, trains
+switch on and connect to it. The centre's own cold start is not hidden by it: the baselines' fix times are
+measured from the centre's start (`RunLog.warm_up_s` before time 0), and a run with `warm_up_s=0` starts the
+centre and the trains together (every train's first fix then waits for the network's). `WarmUpWorld` keeps
+the scenario's sky, faults and train motion on the scenario's own clock (see there).
+
 The truth is read only by `truth.py` and by the evaluation here (`_evaluate_*`), never handed to the
 centre or the onboard unit.
 """
@@ -24,6 +32,7 @@ from __future__ import annotations
 
 import collections
 import dataclasses
+import datetime as _dt
 import math
 import time as wallclock
 from dataclasses import dataclass, field
@@ -34,7 +43,9 @@ import numpy as np
 
 from augnet.centre.engine import CentreEngine, EpochReport
 from augnet.centre.vrs import synthesize
+from augnet.gnss import time as gtime
 from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
+from augnet.gnss.ephemeris import NavigationData
 from augnet.onboard.balise import BaliseEvent, ListSink
 from augnet.onboard.corrections import CorrectionDecoder
 from augnet.onboard.ntrip_client import DEFAULT_GGA_INTERVAL_S
@@ -47,16 +58,22 @@ from augnet.scenario.observations import RoverObservations, StationObservations
 from augnet.scenario.truth import TruthIndex
 from ntrip_caster.gga import parse_gga
 from ntrip_caster.reposition import RepositionPolicy
+from stations import constellation as const
 from stations.rtcm_stream import RtcmStreams
 from stations.scenario import Scenario, ScenarioError, load_scenario
 from stations.trackmap_export import track_database
-from stations.world import EpochBlock, World
+from stations.world import EpochBlock, Receiver, World
 
 GGA_INTERVAL_S = DEFAULT_GGA_INTERVAL_S  # the onboard NTRIP client's GGA upload period
 # Receivers whose id starts with this are check points (static receivers at surveyed points inside the
 # network, as in network-70km): not network stations; the interpolation is evaluated at them.
 CHECK_POINT_PREFIX = "check"
 TRUTH_EPOCHS_KEPT = 8  # network epochs are released within a few epochs of their tag (aligner wait 1 s)
+# How long the reference stations and the centre run before the trains' time 0 (scenarios with trains; see
+# the module docstring). On the demo a cold network has fixed its short baselines and about half the
+# satellites of its long ones by then; it reaches its steady ~80 % after ~10 minutes. So 300 s is the
+# conservative side of "a centre in service" (which runs for months) while keeping runs short.
+DEFAULT_WARM_UP_S = 300.0
 
 
 def load(scenario: str | Path | Scenario, duration_s: float | None = None) -> Scenario:
@@ -67,6 +84,87 @@ def load(scenario: str | Path | Scenario, duration_s: float | None = None) -> Sc
             raise ScenarioError(f"scenario {sc.name}: duration must be positive, got {duration_s}")
         sc = sc.model_copy(update={"duration_s": float(duration_s)})
     return sc
+
+
+def warm_up_s_for(sc: Scenario, warm_up_s: float | None) -> float:
+    """The warm-up a run of `sc` uses: `warm_up_s`, or by default `DEFAULT_WARM_UP_S` when the scenario has trains
+    (nothing connects to the centre otherwise: a run without trains is the centre's own cold start), in whole
+    epochs."""
+    if warm_up_s is None:
+        warm_up_s = DEFAULT_WARM_UP_S if sc.trains else 0.0
+    if not (math.isfinite(warm_up_s) and warm_up_s >= 0.0):
+        raise ScenarioError(f"scenario {sc.name}: warm-up must be zero or positive seconds, got {warm_up_s}")
+    return round(warm_up_s * sc.rate_hz) * sc.interval_s
+
+
+def _on_world_clock(sc: Scenario, warm_up_s: float) -> Scenario:
+    """`sc` begun `warm_up_s` earlier: faults and station outages keep their times since the scenario's start."""
+    if not warm_up_s:
+        return sc
+    faults = [f.model_copy(update={"at_s": f.at_s + warm_up_s,
+                                   "until_s": None if f.until_s is None else f.until_s + warm_up_s})
+              for f in sc.faults]
+    stations = [st.model_copy(update={"outages": [(a + warm_up_s, b + warm_up_s) for a, b in st.outages]})
+                for st in sc.stations]
+    return sc.model_copy(update={"start": sc.start - _dt.timedelta(seconds=warm_up_s),
+                                 "duration_s": sc.duration_s + warm_up_s, "faults": faults, "stations": stations})
+
+
+class WarmUpWorld(World):
+    """The scenario's world begun `warm_up_s` before the scenario's start (`start_gpst`), the reference stations
+    observing throughout; everything the scenario times keeps the scenario's clock:
+
+    - the trains' receivers are switched off during the warm-up (no observation; they acquire at time 0 as in a
+      cold world) and stand at their start point; from time 0 they move exactly as the scenario says;
+    - the nominal constellation stays placed at the scenario's start, so the sky at every scenario epoch is the
+      one a world begun at the start has (orbits, broadcast sets and truth are propagated back over the
+      warm-up);
+    - faults and station outages keep their times since the scenario's start.
+
+    Random draws (noise, multipath, clocks, slips, new-arc ambiguities) come from the same seeded streams, now
+    also drawn during the warm-up, so their realisation after time 0 is another one than without warm-up.
+    With `warm_up_s == 0` it is the plain `World`."""
+
+    def __init__(self, scenario: Scenario, warm_up_s: float = 0.0):
+        self.warm_up_epochs = int(round(warm_up_s * scenario.rate_hz))
+        self.warm_up_s = self.warm_up_epochs * scenario.interval_s
+        self.start_gpst = float(gtime.from_datetime(scenario.start))
+        super().__init__(_on_world_clock(scenario, self.warm_up_s))
+        if self.warm_up_epochs and self.nominal:
+            t_end = float(self.t_tags[-1])
+            self.orbits = const.nominal_orbits(scenario.constellations, self.start_gpst, scenario.seed)
+            self.ephemerides = const.broadcast_ephemerides(self.orbits, self.t0, t_end)
+            self.nav = NavigationData(self.ephemerides)
+            self.truth_nav = NavigationData(const.broadcast_ephemerides(self.orbits, self.t0, t_end, quantised=False))
+            if [s for s in self.nav.satellites if s[0] in scenario.constellations] != self.sats:
+                raise RuntimeError("the constellation placed at the scenario's start has other satellites")
+
+    def _build_receivers(self) -> list[Receiver]:
+        out = super()._build_receivers()
+        n = self.warm_up_epochs
+        if not n:
+            return out
+
+        def later(a: np.ndarray, standing=None) -> np.ndarray:
+            """`a` (per epoch, from the world's start) delayed by the warm-up; `standing` (or a[0]) before."""
+            b = np.empty_like(a)
+            b[n:] = a[:len(a) - n]
+            b[:n] = a[0] if standing is None else standing
+            return b
+
+        for r in out:
+            if r.kind != "train":
+                continue
+            # super() moved the train from the world's start; move it from the scenario's start instead
+            r.ecef = later(r.ecef)
+            r.velocity = later(r.velocity, 0.0)
+            r.km = later(r.km)
+            r.speed_m_s = later(r.speed_m_s, 0.0)
+            r.swept_mask_deg = later(r.swept_mask_deg)
+            r.cutting_deg = later(r.cutting_deg)
+            r.heading_rad = later(r.heading_rad)
+            r.outage = later(r.outage, True)  # switched off until time 0
+        return out
 
 
 def move_base(unit: OnboardUnit, position_m: np.ndarray) -> bool:
@@ -145,13 +243,15 @@ class RunLog:
     latency: dict
     line_llh: np.ndarray | None
     blockages: list[dict]
-    network_epochs: int = 0
-    epochs: int = 0
+    network_epochs: int = 0  # from the centre's start (the warm-up's included)
+    epochs: int = 0  # the scenario's
+    warm_up_s: float = 0.0  # the stations and the centre started this long before the scenario (t0)
+    world_epochs: int = 0  # simulated, the warm-up's included
     wall_s: float = 0.0
     age_limit_s: float = 0.0
     integrity_risk: float = DEFAULT_INTEGRITY_RISK
     min_rtk_satellites: int = 5
-    t0: float = 0.0
+    t0: float = 0.0  # the scenario's start [GPST s]: the trains' time 0
     line_length_m: float = math.nan
     series: dict = field(default_factory=dict)  # per-epoch figures, filled by report.build
 
@@ -174,10 +274,11 @@ class _Train:
 class Chain:
     """The system under test wired in-process, fed one simulator block at a time."""
 
-    def __init__(self, world: World, options: RtkOptions | None = None):
+    def __init__(self, world: WarmUpWorld, scenario: Scenario, options: RtkOptions | None = None):
         self.world = world
-        sc = world.scenario
-        self.t0 = world.t0
+        self.scenario = sc = scenario
+        self.t0 = world.start_gpst  # the scenario's start: the trains' time 0
+        self.warm_up_s = world.warm_up_s  # the centre starts this long before it (world.t0)
         self.latency = LatencyModel(sc.seed)
         self.options = options or RtkOptions()
         self.truth = TruthIndex(world)
@@ -192,7 +293,7 @@ class Chain:
         self.stations = {r.id: r.ecef[0].copy() for r in rx if r.id in self.station_names}
         self.check_points = {r.id: r.ecef[0].copy() for r in rx
                              if r.kind == "station" and r.id.startswith(CHECK_POINT_PREFIX)}
-        self.engine = CentreEngine(self.stations, self.t0, network_name=sc.name)
+        self.engine = CentreEngine(self.stations, world.t0, network_name=sc.name)
         self.track_db = TrackDatabase.from_dict(track_database(sc)) if sc.line is not None else None
         self.trains: dict[str, _Train] = {}
         for i, r in enumerate(rx):
@@ -211,9 +312,10 @@ class Chain:
         self.interpolation_floor: dict[str, list[float]] = {p: [] for p in self.interpolation}
         self._truth_epochs: dict[float, tuple[EpochBlock, int]] = {}
         self._vrs_master: dict[float, dict[str, str]] = {}  # VRS epoch -> train -> its master station
-        self._now = self.t0
+        self._now = world.t0
         self.network_epochs = 0
-        self.epochs = 0
+        self.epochs = 0  # the scenario's (the trains') epochs
+        self.world_epochs = 0  # with the warm-up's
 
     # --- one block ----------------------------------------------------------------------------------
 
@@ -239,6 +341,11 @@ class Chain:
                     self.engine.feed(name, data, self._now)
             for rep in self.engine.tick(self._now):
                 self._network_epoch(rep)
+            self.world_epochs += 1
+            if t < self.t0 - 1e-6:
+                if on_epoch is not None:
+                    on_epoch()
+                continue  # the warm-up: the trains are switched off
             # trains: solve epoch t with what has arrived by t, then report the position upstream
             for tr in self.trains.values():
                 self._train_epoch(tr, blk, e, t)
@@ -420,7 +527,7 @@ class Chain:
     # --- the record ---------------------------------------------------------------------------------
 
     def log(self) -> RunLog:
-        sc = self.world.scenario
+        sc = self.scenario
         line_llh = None
         blockages = []
         if self.world.track is not None:
@@ -433,18 +540,22 @@ class Chain:
         return RunLog(sc, {k: v.log for k, v in self.trains.items()}, self.baselines, self.interpolation,
                       self.interpolation_floor,
                       self.stations, self.check_points, self.track_db, self.latency.describe(), line_llh,
-                      blockages, self.network_epochs, self.epochs, age_limit_s=opt.max_age_s,
+                      blockages, self.network_epochs, self.epochs, warm_up_s=self.warm_up_s,
+                      world_epochs=self.world_epochs, age_limit_s=opt.max_age_s,
                       min_rtk_satellites=opt.min_fix_ambiguities + 1, t0=self.t0,
                       line_length_m=self.world.track.length_m if self.world.track is not None else math.nan)
 
 
 def simulate(scenario: str | Path | Scenario, *, duration_s: float | None = None,
-             on_epoch: Callable[[], None] | None = None, options: RtkOptions | None = None) -> RunLog:
-    """Run the chain over the whole scenario and return the per-epoch record (no files written)."""
+             on_epoch: Callable[[], None] | None = None, options: RtkOptions | None = None,
+             warm_up_s: float | None = None) -> RunLog:
+    """Run the chain over the warm-up and the whole scenario and return the per-epoch record (no files
+    written). `warm_up_s`: see `warm_up_s_for`."""
     sc = load(scenario, duration_s)
+    warm = warm_up_s_for(sc, warm_up_s)
     start = wallclock.perf_counter()
-    world = World(sc)
-    chain = Chain(world, options)
+    world = WarmUpWorld(sc, warm)
+    chain = Chain(world, sc, options)
     for blk in world.epochs():
         chain.add_block(blk, on_epoch)
     log = chain.log()
@@ -453,11 +564,14 @@ def simulate(scenario: str | Path | Scenario, *, duration_s: float | None = None
 
 
 def run(scenario: str | Path | Scenario, out_dir: str | Path, *, duration_s: float | None = None,
-        progress: bool = True, plots: bool = True, alert_limit_m: float | None = None):
-    """The scenario end to end: `report.json` (and per-epoch CSV, PNG plots) in `out_dir`; returns the Report."""
+        progress: bool = True, plots: bool = True, alert_limit_m: float | None = None,
+        warm_up_s: float | None = None):
+    """The scenario end to end: `report.json` (and per-epoch CSV, PNG plots) in `out_dir`; returns the Report.
+    `warm_up_s`: how long the stations and the centre run before the trains' time 0 (`warm_up_s_for`)."""
     from augnet.scenario import report as report_mod
 
     sc = load(scenario, duration_s)
+    warm = warm_up_s_for(sc, warm_up_s)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if progress:
@@ -465,10 +579,10 @@ def run(scenario: str | Path | Scenario, out_dir: str | Path, *, duration_s: flo
 
         with Progress(TextColumn(f"[bold]{sc.name}[/bold] simulated s"), BarColumn(), MofNCompleteColumn(),
                       TimeRemainingColumn()) as bar:
-            task = bar.add_task("run", total=sc.n_epochs)
-            log = simulate(sc, on_epoch=lambda: bar.advance(task))
+            task = bar.add_task("run", total=sc.n_epochs + round(warm * sc.rate_hz))
+            log = simulate(sc, on_epoch=lambda: bar.advance(task), warm_up_s=warm)
     else:
-        log = simulate(sc)
+        log = simulate(sc, warm_up_s=warm)
     rep = report_mod.build(log, alert_limit_m=alert_limit_m or report_mod.DEFAULT_ALERT_LIMIT_M)
     report_mod.write_epochs_csv(log, out / report_mod.EPOCHS_CSV)
     rep.files.append(report_mod.EPOCHS_CSV)

@@ -1,17 +1,18 @@
 """The runner's pieces on their own: reading the ionosphere out of a VRS, the truth's DD ambiguities, balise
-passages, outage runs and acquisitions, protection levels, the latency model."""
+passages, outage runs and acquisitions, protection levels, the latency model, the warm-up world."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
+import pytest
 
 from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
 from augnet.gnss.geometry import enu_rotation, geodetic_to_ecef
 from augnet.scenario import metrics as M
 from augnet.scenario.latency import LatencyModel
-from augnet.scenario.runner import vrs_ionosphere_m
+from augnet.scenario.runner import DEFAULT_WARM_UP_S, WarmUpWorld, load, vrs_ionosphere_m, warm_up_s_for
 from augnet.scenario.truth import TruthIndex, passages
 
 
@@ -120,3 +121,46 @@ def test_a_base_epoch_reused_by_a_low_latency_rover_is_not_a_slip():
     assert not det.detect(second).any()
     assert not det.detect(second).any()  # the same epoch again
     np.testing.assert_array_equal(det.detect(first), np.isfinite(first.phase_cyc))  # back in time: all restart
+
+
+def test_warm_up_defaults_to_300_s_with_trains_and_none_without():
+    from stations.scenario import ScenarioError
+
+    assert warm_up_s_for(load("demo"), None) == DEFAULT_WARM_UP_S == 300.0
+    assert warm_up_s_for(load("baseline-10km"), None) == 0.0  # nothing connects: the centre's own cold start
+    assert warm_up_s_for(load("demo"), 0) == 0.0
+    assert warm_up_s_for(load("demo"), 12.4) == 12.0  # whole epochs
+    for bad in (-1.0, math.nan, math.inf):
+        with pytest.raises(ScenarioError, match="warm-up"):
+            warm_up_s_for(load("demo"), bad)
+
+
+def test_the_warm_up_world_keeps_the_scenarios_sky_and_trains_and_switches_the_trains_on_at_time_0():
+    """The stations observe during the warm-up; from the scenario's start on, the sky (satellite ranges,
+    elevations, clocks and orbit errors, atmosphere) and the trains' motion are those of the world begun at the
+    start, and the trains' receivers acquire at time 0 (switched off before)."""
+    from stations.world import World
+
+    sc = load("demo", 10)
+    warm_s = 30
+    cold, warm = World(sc), WarmUpWorld(sc, warm_s)
+    assert warm.t0 == cold.t0 - warm_s and warm.start_gpst == cold.t0 and warm.n_epochs == 40
+    np.testing.assert_array_equal(warm.t_tags[warm_s:], cold.t_tags)
+    blocks = list(warm.epochs(block=10))
+    b_cold = next(cold.epochs(block=10))
+    b_warm = blocks[3]  # epochs 30-39: the scenario's 0-9
+    assert b_warm.epoch_index[0] == warm_s
+    for key in ("range_m", "elevation_rad", "rx_ecef", "stec_tecu", "tropo_m", "orbit_error_range_m",
+                "sat_clock_error_s"):
+        np.testing.assert_array_equal(getattr(b_warm, key), getattr(b_cold, key), err_msg=key)
+    trains = [i for i, r in enumerate(warm.receivers) if r.kind == "train"]
+    stations = [i for i, r in enumerate(warm.receivers) if r.kind == "station"]
+    for i in trains:
+        np.testing.assert_array_equal(warm.receivers[i].km[warm_s:], cold.receivers[i].km)
+        assert np.all(warm.receivers[i].km[:warm_s] == cold.receivers[i].km[0])  # standing, switched off
+    for blk in blocks[:3]:
+        assert not blk.observed[:, trains].any() and blk.observed[:, stations].any()
+    # the trains acquire at time 0 as in the cold world: new arcs, lock time 0
+    np.testing.assert_array_equal(b_warm.observed[:, trains], b_cold.observed[:, trains])
+    assert np.all(b_warm.lock_time_s[0, trains][b_warm.observed[0, trains]] == 0.0)
+    assert np.all(b_warm.lock_time_s[0, stations][b_warm.observed[0, stations]] > 0.0)  # tracking for 30 s

@@ -1,9 +1,10 @@
 """`augnet scenario run`: the whole chain on the demo line against the simulator's truth.
 
-One shortened demo run (DEMO_S simulated seconds, written to a temporary folder with its plots) serves the
-module: the report's schema and files, the PNGs, the figures the chain meets today, and the issue's
-targets as a strict xfail with the figures measured on the full 600 s demo. The full run takes ~2 min on
-the shared 2-core machine (`augnet scenario run demo --out DIR`); the short one ~30 s.
+One full demo run (the 600 s scenario after the stations' and the centre's 300 s warm-up, written to a
+temporary folder with its plots; ~1 min on the shared 2-core machine, as `augnet scenario run demo --out DIR`)
+serves the module: the report's schema and files, the PNGs, the figures the chain meets, and the issue's
+targets (a strict xfail with the figures it measures while one is not met). A few short runs show what the
+warm-up changes: trains switched on into a running centre against trains started with a cold one.
 """
 
 from __future__ import annotations
@@ -16,12 +17,10 @@ import pytest
 from typer.testing import CliRunner
 
 from augnet.scenario import report as R
-from augnet.scenario.runner import run
+from augnet.scenario.runner import DEFAULT_WARM_UP_S, run, simulate
 from stations.scenario import ScenarioError
 
-# 150 s: the network fixes its first baselines after ~40 s, the slower train G101 its first ambiguities ~35 s
-# after the start, and both trains pass two or more virtual balises.
-DEMO_S = 150
+DEMO_S = 600  # the demo scenario's own duration
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 TRAINS = ("G101", "G303")
 
@@ -29,7 +28,7 @@ TRAINS = ("G101", "G303")
 @pytest.fixture(scope="module")
 def demo(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo")
-    rep = run("demo", out, duration_s=DEMO_S, progress=False)
+    rep = run("demo", out, progress=False)
     return rep, out, json.loads((out / R.REPORT_JSON).read_text())
 
 
@@ -46,7 +45,11 @@ def test_report_json_has_every_documented_key(demo):
                                        "balise_missed", "balise_false", "pl_violations")} <= ids
     assert {"network.baseline_fix", "network.wrong_fixes", "network.interpolation"} <= ids
     assert d["passed"] is all(t["pass"] is not False for t in d["targets"])
-    assert d["run"]["epochs"] == DEMO_S and d["run"]["network_epochs"] >= DEMO_S - 2
+    run_ = d["run"]
+    assert run_["epochs"] == DEMO_S and run_["warm_up_s"] == DEFAULT_WARM_UP_S == 300.0
+    assert run_["centre_start_s"] == -300.0 and run_["world_epochs"] == DEMO_S + 300
+    assert run_["network_epochs"] >= DEMO_S + 300 - 2
+    assert {"warm_up", "baseline_first_fix", "ttff"} <= set(d["definitions"])
     for name in d["files"]:
         assert (out / name).stat().st_size > 0, name
     rows = (out / R.EPOCHS_CSV).read_text().splitlines()
@@ -73,54 +76,79 @@ def test_plots_are_png_images_with_content(demo):
         assert img[..., :3].std() > 0.05, f"{name} is blank"  # something was drawn
 
 
-def test_the_chain_against_the_truth_in_the_first_150_s(demo):
-    """What the chain does reach today (the issue's targets as a whole are the xfail below)."""
+def test_the_chain_against_the_truth_on_the_demo(demo):
+    """What the chain reaches on the demo, target by target beside the issue's own (the xfail below)."""
     rep, _, d = demo
-    g101 = d["trains"]["G101"]
     for tid, f in d["trains"].items():
         assert f["session_opened_s"] == 0.0  # the first GGA (from the first SPP) opens the VRS session
+        # a running centre: the first VRS epoch carries enough corrected satellites (~1 s link), the fix follows
+        assert f["corrections_usable_s"] <= 3.0, tid
+        assert f["acquisitions"][0]["time_s"] <= R.TARGET_TTFF_S, tid
+        assert f["acquisition_time_median_s"] <= R.TARGET_TTFF_S, tid
         assert f["wrong_fixes"] == 0, tid
-        # never a confirmed wrong track, never off the map; an unconfirmed guess 3 m off in a float epoch
-        # (G303 at 27 s, HPL 17 m spans both tracks) is counted by the target, in the xfail below
+        assert f["fix_rate_after_first_fix"] >= R.TARGET_FIX_RATE, tid
+        assert f["horizontal_error_m"]["p95"] <= R.TARGET_H95_M and f["vertical_error_m"]["p95"] <= R.TARGET_V95_M
+        # the right track in every epoch with a position, never off the map; none in the tunnel
         tr = f["track_id"]
-        assert tr["confirmed_wrong"] == 0 and tr["off_map"] == 0, (tid, tr)
-        assert tr["wrong"] <= 0.02 * tr["epochs_with_position"], (tid, tr)
-        assert f["track_id"]["epochs_with_position"] == DEMO_S
-        assert f["virtual_balises"]["false"] == 0
-        assert f["virtual_balises"]["captured"] >= 1  # G101 at km 86 (135 s), G303 at 156 and 151
-        assert f["virtual_balises"]["capture_error_m"]["max"] <= R.TARGET_BALISE_ERROR_M
-        age = f["correction_age_s"]
-        assert age["p50"] == 1.0 and age["over_limit"] == 0  # low-latency rover: the previous epoch's VRS
-        assert f["vrs_moves"] >= DEMO_S // 10 - 3  # the session follows the GGA at most every 10 s
-    for tid, f in d["trains"].items():
+        assert tr["wrong"] == 0 and tr["off_map"] == 0 and tr["confirmed_wrong"] == 0, (tid, tr)
+        assert tr["epochs_with_position"] == f["epochs"] - f["epochs_without_sky"], tid
+        vb = f["virtual_balises"]
+        assert vb["false"] == 0 and vb["missed_with_gnss"] == 0, (tid, vb["missed_ids"])
+        assert vb["captured"] >= 5  # G101 from km 81 (22.5 s) on, G303 from km 156 (50 s) on
+        assert vb["capture_error_m"]["max"] <= R.TARGET_BALISE_ERROR_M
         pl = f["protection_level"]
         assert pl["h_error_over_hpl"] + pl["v_error_over_vpl"] == 0, (tid, pl)
-    # G101 (160 km/h, 10-20 km from STA2) fixes within seconds of usable corrections and holds the fix while
-    # its VRS moves with it every 10 s (the same base at a new point: ambiguities kept) and while a late VRS
-    # epoch makes it reuse the previous one (correction age 2 s)
-    assert g101["ttff_s"] is not None and g101["ttff_s"] <= 30.0
-    assert g101["fix_rate_after_first_fix"] >= R.TARGET_FIX_RATE
+        age = f["correction_age_s"]
+        assert age["p50"] == 1.0 and age["over_limit"] == 0  # low-latency rover: the previous epoch's VRS
+        assert f["vrs_moves"] >= tr["epochs_with_position"] // 10 - 5  # the session follows the GGA every 10 s
+    # G101 holds its fix while a late VRS epoch makes it reuse the previous one (correction age 2 s), and
+    # passes its km 81 balise 22.5 s after switching on, with its fix
+    g101 = d["trains"]["G101"]
     assert g101["correction_age_s"]["max"] >= 2.0
-    assert g101["horizontal_error_m"]["p95"] <= R.TARGET_H95_M
-    assert g101["vertical_error_m"]["p95"] <= R.TARGET_V95_M
-    assert g101["virtual_balises"]["capture_error_m"]["max"] <= R.TARGET_BALISE_ERROR_M
-    assert d["network"]["wrong_fixes"] == 0 and d["network"]["checked"] > 5000
-    assert d["interpolation"]["dd_iono_error_m"]["n"] > 1000
+    assert "VB-L1-1-081.000" in [e["id"] for e in g101["virtual_balises"]["events"]]
+    assert g101["virtual_balises"]["missed_ids"] == g101["virtual_balises"]["outage_ids"] == ["VB-L1-1-101.000"]
+    # the centre's figures run from its own cold start, 300 s before the trains
+    assert d["network"]["wrong_fixes"] == 0 and d["network"]["checked"] > 50000
+    for name, b in d["baselines"].items():
+        assert b["first_fix_s"] is not None and 0.0 < b["first_fix_s"] <= DEMO_S + 300.0, name
+    assert d["interpolation"]["dd_iono_error_m"]["n"] > 10000
 
 
 @pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "issue 8's targets not all met. Full 600 s demo, measured 2026-11-22 at 2ff8564 (centre learning the day's "
-    "ionosphere level; onboard counting validated partial fixes towards confirmation): 20 of 23 targets pass - "
-    "no wrong fix (trains or network), no epoch beyond its protection level, fixed after the first fix 99.62 / "
-    "99.64 %, H95 1.0-1.1 / V95 2.0-2.9 cm, time to (re-)fix G101 7.5 s, right track in every epoch, network "
-    "baselines fix in a median 48 s. Not met: G303 time to (re-)fix 17.5 s (its first fix at 33 s: the VRS "
-    "carries 8 usable satellites until 50 s and the complete fix's position sigma stays just over the 3 cm "
-    "gate); interpolated DD ionosphere 1.012 cm RMS (goal 1 cm); G101's km 81 balise passed before its first "
-    "confirmed position (counted missed)."))
+    "issue 8's targets not all met. Full 600 s demo after the 300 s warm-up of the stations and the centre "
+    "(the trains switch on into a running network), measured 2026-11-22 at 4eedd58 + this change: 22 of 23 "
+    "targets pass - no wrong fix (trains, and 92,648 network DD ambiguity-epochs), no epoch beyond its "
+    "protection level, right track in every epoch, fixed after the first fix 99.63 / 99.66 %, H95 0.9-1.0 / V95 "
+    "2.1-2.9 cm, time to (re-)fix G101 3.5 s (first fix 5 s after usable corrections at 2 s, re-fix after the "
+    "tunnel 2 s), G303 4.5 s (7 s, 2 s), every balise passed with GNSS captured (G101's km 81 at 22.5 s, 6 mm), "
+    "largest capture error 9 mm, network arcs fix in a median 36.5 s from the centre's cold start. Not met: "
+    "interpolated DD ionosphere 1.052 cm RMS (goal 1 cm; 1.06 cm from the truth's own station residuals, the "
+    "interpolation model's floor on this run: the centre's)."))
 def test_must_show_the_demo_meets_the_targets(demo):
     rep, _, d = demo
     failed = [(t["id"], t["measured"], t["target"]) for t in d["targets"] if t["pass"] is False]
     assert failed == []
+
+
+def test_trains_switched_on_into_a_running_centre_against_a_cold_one():
+    """The warm-up is what the trains' first figures measure: 25 s of the demo after a 60 s warm-up, and with
+    the centre started cold together with the trains (--warm-up 0). Cold, the network has fixed no baseline
+    yet and the VRS carries too few corrected satellites for 11-17 s (the centre of 4eedd58); warm, the
+    trains' first VRS epoch (2 s) is usable and they fix within seconds. The baselines' first fix is counted
+    from the centre's start."""
+    warm = R.build(simulate("demo", duration_s=25, warm_up_s=60))
+    cold = R.build(simulate("demo", duration_s=25, warm_up_s=0))
+    assert warm.run["warm_up_s"] == 60.0 and warm.run["centre_start_s"] == -60.0 and warm.run["epochs"] == 25
+    assert cold.run["warm_up_s"] == 0.0 and cold.run["world_epochs"] == cold.run["network_epochs"] == 25
+    for tid in TRAINS:
+        w, c = warm.trains[tid], cold.trains[tid]
+        assert w["epochs"] == c["epochs"] == 25
+        assert w["corrections_usable_s"] == 2.0 and w["first_fix_s"] is not None and w["first_fix_s"] <= 15.0, tid
+        assert c["corrections_usable_s"] is None or c["corrections_usable_s"] >= 10.0, tid
+        assert c["first_fix_s"] is None or c["first_fix_s"] > w["first_fix_s"], tid
+    assert all(b["first_fix_s"] is None for b in cold.baselines.values())
+    fixed = [b["first_fix_s"] for b in warm.baselines.values() if b["first_fix_s"] is not None]
+    assert fixed and all(0.0 < x <= 85.0 for x in fixed)  # since the centre's start, 60 s before the trains
 
 
 def test_unknown_scenario_is_refused_naming_it(tmp_path):
@@ -143,6 +171,15 @@ def test_cli_refuses_an_unknown_scenario_and_runs_a_short_one(tmp_path):
     assert good.exit_code == 0, good.output
     d = json.loads((tmp_path / "b" / R.REPORT_JSON).read_text())
     assert R.schema_problems(d) == [] and d["trains"] == {} and d["run"]["epochs"] == 15
+    assert d["run"]["warm_up_s"] == 0.0  # no train: the run is the centre's own cold start
+    warm = runner.invoke(app, ["scenario", "run", "baseline-10km", "--out", str(tmp_path / "w"), "--duration", "5",
+                               "--warm-up", "10", "--no-plots", "--quiet"])
+    assert warm.exit_code == 0, warm.output
+    d = json.loads((tmp_path / "w" / R.REPORT_JSON).read_text())
+    assert d["run"]["warm_up_s"] == 10.0 and d["run"]["world_epochs"] == 15 and d["run"]["epochs"] == 5
+    assert "warm-up" in warm.output
+    bad_warm = runner.invoke(app, ["scenario", "run", "demo", "--out", str(tmp_path / "x"), "--warm-up", "-3"])
+    assert bad_warm.exit_code == 2 and "warm-up" in bad_warm.output
     assert "network.wrong_fixes" in good.output  # the targets table
     strict = runner.invoke(app, ["scenario", "run", "baseline-10km", "--out", str(tmp_path / "s"), "--duration", "2",
                                  "--no-plots", "--quiet", "--strict"])
