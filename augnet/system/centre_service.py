@@ -49,6 +49,7 @@ from __future__ import annotations
 import asyncio
 import collections
 import dataclasses
+import gc
 import logging
 import multiprocessing as mp
 import os
@@ -489,6 +490,7 @@ class _CentreWorker:
         self.engine = CentreEngine(stations, spec.t_ref_gpst, network_name=spec.network_name)
         self.engine.after_serve = self._flush_vrs  # VRS leave as soon as they exist, before the network solve
         self.engine.serve_group = VRS_GROUP
+        gc.freeze()  # the engine's long-lived start-up objects: not scanned by every full collection
         self.batch: list[tuple[str, bytes]] = []
         self.buf = bytearray()
         self._inbox: collections.deque = collections.deque()  # commands read, not yet applied
