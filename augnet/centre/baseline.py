@@ -10,8 +10,8 @@ Per epoch (network-rtk.md, "the network engine"):
 3. A Kalman filter on the double differences (DD) of code and phase on both frequencies, ionosphere
    weighted: states are the residual zenith wet delay of each station (with a prior on their difference),
    and per satellite the between-station single-difference (SD) slant ionosphere on f1 (a random walk with
-   a prior in ppm of the baseline length, vertical, mapped with the elevation: DD ionosphere is ~1-4 ppm
-   of the baseline on a quiet day, network-rtk.md), the SD ambiguities on f1 and f2, and the SD code and
+   a wide prior in ppm of the baseline length, vertical, mapped with the elevation: a storm's, so that no
+   state is ever pulled by a prior the day disproves), the SD ambiguities on f1 and f2, and the SD code and
    phase multipath on f1 and f2 (first-order Gauss-Markov: static-station multipath is correlated over
    minutes, and a white-noise model made the float covariance several times too optimistic). This is the
    uncombined equivalent of Melbourne-Wuebbena wide-lane fixing followed by ionosphere-free narrow-lane
@@ -19,7 +19,10 @@ Per epoch (network-rtk.md, "the network engine"):
    pairs (e.g. N1 + 7, Nw - 2 on GPS L1/L2; (3, 4) on Galileo E1/E5a) that the ionosphere-free phase alone
    cannot tell apart.
 4. LAMBDA with partial fixing on the DD ambiguities (both frequencies, wide-lane pre-transform), ratio
-   test and bootstrapped success rate, the float solution conditioned on the network's ionosphere hints
+   test and bootstrapped success rate, the float solution conditioned on the ionosphere prior in force (DD
+   ionosphere is ~1-4 ppm of the baseline on a quiet day, network-rtk.md: the quiet default, raised by the
+   ionosphere's rate measured from the SD geometry-free phase before anything is committed, then the day's
+   level learned from the fixed satellites of the whole network) and on the network's ionosphere hints
    (other baselines' fixed satellites, `network.py`) when there are any; a DD ambiguity is fixed when the
    conditioned solution pins it to an integer and the same integer has come out on several consecutive
    epochs (fewer when the success rate is very high); a wide lane pinned on its own is held while its
@@ -105,6 +108,26 @@ class BaselineConfig:
     # show 0.2-0.7 ppm (rising to 0.55-0.67 over ten minutes as the low ones join), a moderate day 1.0-1.6.
     iono_day_min_sats: int = 4
     iono_day_floor_ppm: float = 0.7
+    # The filter's own SD ionosphere prior [ppm]: wide enough for a storm. The prior in force (the default, the
+    # measured activity's or the day's level) enters the integer decision only, as a DD ionosphere
+    # pseudo-observation making up the difference (`_prior_hints`): a state that took 1.5 ppm on a storm day
+    # has already pulled its ambiguities along the ionosphere's near-null direction (towards the wrong wide lane
+    # and the (4, 5)-type pairs), and no variance added later undoes that.
+    iono_state_prior_ppm: float = 10.0
+    # Ionosphere activity from the SD geometry-free phase (`_measure_activity`): increments over this lag, the
+    # smoothing and the increments needed before the rate counts
+    activity_lag_s: float = 10.0
+    activity_tau_epochs: float = 30.0
+    activity_min_samples: int = 40
+    # What the activity says about the prior: an ionosphere that moves fast is seldom flat. Before the day's level
+    # is known the prior in force is raised to this many ppm per ppm/sqrt(s) of measured rate (0: off), and
+    # nothing is fixed before the rate is known. The simulator's levels (network-70km, 50 km baselines) move at
+    # 0-0.02 (quiet, moderate), 0.02-0.05 (active) and 0.065-0.10 (storm) ppm/sqrt(s), with fixed satellites
+    # showing 0.6, 1.5-3.4, 4-11 and 7-15 ppm: 150 keeps the quiet default and covers the others; a network in
+    # service should fit it to its own history.
+    iono_activity_ppm_per_rate: float = 150.0
+    # The random walk of the SD ionosphere states: the configured rate or this times the measured one
+    activity_rate_margin: float = 1.5
     # Initial SD ambiguity sigma [cycles]: set from code, so a few hundred cycles covers anything.
     amb_prior_sigma_cyc: float = 300.0
     # Satellites below this elevation stay float (their corrections are not produced): at 10-15 degrees the
@@ -159,6 +182,7 @@ class _Track:
     candidate: list = field(default_factory=lambda: [None, None, None])  # per table: N1, N2, wide lane
     streak: list = field(default_factory=lambda: [0, 0, 0])
     bad_streak: int = 0
+    sd_gf: list = field(default_factory=list)  # recent (t, SD geometry-free phase [m]) of the current arc
 
 
 @dataclass
@@ -206,7 +230,6 @@ class BaselineSolver:
         self.length_m = float(np.linalg.norm(self.xyz_b - self.xyz_a))
         self.cfg = config or BaselineConfig()
         cfg = self.cfg
-        self.iono_q = (cfg.iono_rate_ppm_sqrt_s * 1e-6 * self.length_m) ** 2
         self.tracks: dict[str, _Track] = {}
         self.refs: dict[str, str] = {}
         # sat -> DD integer against refs[sys]: N1, N2, and the wide lane N1 - N2 (held on its own while the
@@ -229,6 +252,11 @@ class BaselineSolver:
         self._iono_day_own: float | None = None  # the day's prior from this baseline's fixed satellites [ppm]
         self.iono_day_network: float | None = None  # ... from the whole network's (set by NetworkSolver) [ppm]
         self.iono_day_q = np.zeros(0)  # this epoch's fixed satellites' DD ionosphere [ppm, vertical]
+        # mean squared SD geometry-free increments and their spans: one epoch, and the lag [ppm^2, s, ppm^2, s]
+        self._activity: np.ndarray | None = None
+        self._activity_samples = 0
+        self.iono_rate_network: float | None = None  # the network's mean rate (set by NetworkSolver)
+        self._dry_level: float | None = None  # prior in force while decisions ran without committing [ppm]
         self._iono_p0: dict[str, float] = {}  # sat -> prior variance its SD ionosphere state started with [m^2]
 
     @property
@@ -251,7 +279,8 @@ class BaselineSolver:
         self.x = np.concatenate([self.x, [iono_m, n1, n2], np.zeros(B - 3)])
         P = np.zeros((n + B, n + B))
         P[:n, :n] = self.P
-        P[n, n] = max(self.iono_prior_var * iono_var_scale, self.cfg.iono_prior_min_m**2)
+        P[n, n] = max((self.cfg.iono_state_prior_ppm * 1e-6 * self.length_m) ** 2 * iono_var_scale,
+                      self.cfg.iono_prior_min_m**2)
         self._iono_p0[sat] = P[n, n]
         P[n + 1, n + 1] = P[n + 2, n + 2] = self.cfg.amb_prior_sigma_cyc**2
         if self._mpc is not None:
@@ -355,6 +384,7 @@ class BaselineSolver:
         mp_var = cfg.code_multipath_share * (cfg.code_sigma_m * cfg.code_correlation_inflation) ** 2 * shape
         mpp_var = cfg.phase_multipath_share * cfg.phase_sigma_m**2 * shape
         iono_scale = self._iono_mapping(np.minimum(ga.elevation_rad, gb.elevation_rad))
+        self._measure_activity(t, sats, slipped | new_arc, iono_scale, gamma)
         for k, s in enumerate(sats):
             s = str(s)
             if s in new_arc or s not in self.index:
@@ -410,8 +440,16 @@ class BaselineSolver:
         self._hold(sats, rows, ref_k)
         self._release(sats, rows, ref_k, ga, gb, lam, gamma, sd_phase, sd_code)
         el_min = np.degrees(np.minimum(ga.elevation_rad, gb.elevation_rad))
+        # Nothing is fixed before the ionosphere's rate is known; the decisions run meanwhile, so their
+        # confirmation counts are ready when it is, and are dropped if the rate raises the prior they used.
+        rate_known = cfg.iono_activity_ppm_per_rate <= 0 or self.iono_rate is not None
+        level = self.iono_level_ppm
+        if rate_known and self._dry_level is not None and level > 1.05 * self._dry_level:
+            for tr in self.tracks.values():
+                tr.candidate, tr.streak = [None, None, None], [0, 0, 0]
+        self._dry_level = None if rate_known else level
         ratio = self._fix(sats, rows[el_min[rows] >= cfg.fix_min_elevation_deg], ref_k,
-                          self._day_prior_hints(sats, rows, ref_k, iono_scale, iono_hints))
+                          self._prior_hints(sats, rows, ref_k, iono_scale, iono_hints), commit=rate_known)
 
         # DD residuals where the integers are known
         n = len(sats)
@@ -464,38 +502,94 @@ class BaselineSolver:
 
     @property
     def iono_day_ppm(self) -> float | None:
-        """The day's ionosphere prior [ppm, vertical]: the larger of this baseline's and the network's, once
-        either is known."""
-        known = [v for v in (self._iono_day_own, self.iono_day_network) if v is not None]
-        return max(known) if known else None
+        """The day's ionosphere prior [ppm, vertical]: the network's (pooled over every baseline's fixed
+        satellites) where there is one, else this baseline's own; None until either is known. (Taking the larger
+        of the two let a baseline's own estimate from its first four satellites, whose 95 % bound is 2.4 times
+        their RMS, hold it back for minutes.)"""
+        return self.iono_day_network if self.iono_day_network is not None else self._iono_day_own
 
     @property
     def iono_level_ppm(self) -> float:
         """The ionosphere prior in force [ppm, vertical]: the day's level once known; before, the default
-        raised (never lowered) by what the few fixed satellites show."""
+        raised (never lowered) by the measured activity and by what the few fixed satellites show."""
         cfg = self.cfg
         ppm = self.iono_day_ppm
         if ppm is not None:
             return ppm
         ppm = cfg.iono_prior_ppm
+        rate = self.iono_rate
+        if rate is not None and cfg.iono_activity_ppm_per_rate > 0:
+            ppm = max(ppm, cfg.iono_activity_ppm_per_rate * rate)
         if self._iono_ms is not None and cfg.iono_prior_adapt > 0:
             ppm = max(ppm, cfg.iono_prior_adapt * math.sqrt(self._iono_ms))
         return ppm
 
     @property
-    def iono_prior_var(self) -> float:
-        """Prior variance of a new satellite's SD ionosphere state, vertical [m^2]."""
-        return (self.iono_level_ppm * 1e-6 * self.length_m) ** 2
+    def iono_rate(self) -> float | None:
+        """The ionosphere's rate [ppm/sqrt(s)]: the network's mean where there is one, else this baseline's."""
+        if self.iono_rate_network is not None:
+            return self.iono_rate_network
+        return self.iono_rate_ppm_sqrt_s
 
-    def _day_prior_hints(self, sats, rows, ref_k, mapping, hints):
-        """The network's hints, plus, where the day's prior is tighter than the one a satellite's ionosphere
+    @property
+    def iono_rate_ppm_sqrt_s(self) -> float | None:
+        """This baseline's measured SD ionosphere rate [ppm/sqrt(s), vertical], None until enough increments."""
+        if self._activity is None or self._activity_samples < self.cfg.activity_min_samples:
+            return None
+        ms_short, dt_short, ms_long, dt_long = self._activity
+        if not dt_long > dt_short:
+            return None
+        return math.sqrt(max(ms_long - ms_short, 0.0) / (dt_long - dt_short))
+
+    @property
+    def iono_q(self) -> float:
+        """Random-walk variance rate of the SD ionosphere states, vertical [m^2/s]: the configured rate, or
+        `activity_rate_margin` times the measured one where that is higher."""
+        rate = max(self.cfg.iono_rate_ppm_sqrt_s, self.cfg.activity_rate_margin * (self.iono_rate or 0.0))
+        return (rate * 1e-6 * self.length_m) ** 2
+
+    def _measure_activity(self, t, sats, restarted, mapping, gamma) -> None:
+        """How fast the ionosphere moves between the stations, from the SD geometry-free phase (no ambiguity
+        within an arc, no clock, no geometry: its changes are the SD ionosphere's, plus noise). Per satellite,
+        the increment since the previous epoch and since one at least `activity_lag_s` (and three epochs) back,
+        squared, in vertical ppm of the baseline: E[d^2] = 2 sigma^2 + q dt for white phase noise sigma and a
+        random walk of rate q, so the two means give q whatever the observation interval."""
+        cfg = self.cfg
+        short, long_ = [], []  # (squared increment [ppm^2], its time span [s])
+        for k, s in enumerate(sats):
+            tr = self.tracks[str(s)]
+            if str(s) in restarted:
+                tr.sd_gf = []
+            gf = tr.gf_b - tr.gf_a
+            if not math.isfinite(gf):
+                continue
+            scale = 1.0 / ((gamma[k] - 1.0) * mapping[k] * 1e-6 * self.length_m)
+            hist = tr.sd_gf
+            if hist:
+                dt = t - hist[-1][0]
+                short.append((((gf - hist[-1][1]) * scale) ** 2, dt))
+                span = max(cfg.activity_lag_s, 3.0 * dt)
+                old = next((h for h in reversed(hist) if t - h[0] >= span - 1e-6), None)
+                if old is not None:
+                    long_.append((((gf - old[1]) * scale) ** 2, t - old[0]))
+                while len(hist) > 1 and t - hist[1][0] >= span - 1e-6:
+                    hist.pop(0)
+            hist.append((t, gf))
+        if not short or not long_:
+            return
+        now = np.array([np.mean([d for d, _ in short]), np.mean([d for _, d in short]),
+                        np.mean([d for d, _ in long_]), np.mean([d for _, d in long_])])
+        a = 1.0 if self._activity is None else 1.0 / cfg.activity_tau_epochs
+        self._activity = now if self._activity is None else self._activity + a * (now - self._activity)
+        self._activity_samples += len(long_)
+
+    def _prior_hints(self, sats, rows, ref_k, mapping, hints):
+        """The network's hints, plus, where the prior in force is tighter than the one a satellite's ionosphere
         state (and its reference's) started with, a zero DD ionosphere pseudo-observation whose variance makes
         up the difference (1/new = 1/old + 1/hint): as if the satellite had started with it (combined with the
         network's hint where there is one)."""
-        if self.iono_day_ppm is None:
-            return hints
         out = dict(hints or {})
-        day = (self.iono_day_ppm * 1e-6 * self.length_m) ** 2
+        day = (self.iono_level_ppm * 1e-6 * self.length_m) ** 2
         floor = self.cfg.iono_prior_min_m**2
         for k in rows:
             s, r = str(sats[k]), str(sats[ref_k[k]])
@@ -726,7 +820,7 @@ class BaselineSolver:
             return a_hat, Q
         return a_hat + G @ (z - H @ self.x), Q - G @ DPHt.T
 
-    def _fix(self, sats, rows, ref_k, iono_hints=None) -> float:
+    def _fix(self, sats, rows, ref_k, iono_hints=None, commit: bool = True) -> float:
         """LAMBDA with partial fixing over the DD ambiguities not yet fixed (both frequencies), the float
         solution conditioned on the network's ionosphere hints when there are any."""
         cfg = self.cfg
@@ -805,7 +899,7 @@ class BaselineSolver:
                 continue
             tr.streak[fq] = tr.streak[fq] + 1 if tr.candidate[fq] == val else 1
             tr.candidate[fq] = val
-            if tr.streak[fq] >= confirm:
+            if tr.streak[fq] >= confirm and commit:
                 self.fixed[fq][str(sats[k])] = val
         for k, _ in wl:
             s = str(sats[k])

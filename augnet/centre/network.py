@@ -185,6 +185,9 @@ class NetworkSolver:
         """The day's ionosphere level from every baseline's fixed satellites at once (in ppm of each baseline's
         length): a network of four baselines with three satellites fixed on each knows the day's level after the
         first fixes, where one baseline alone would wait for more."""
+        rates = [s.iono_rate_ppm_sqrt_s for s in self.solvers.values() if s.iono_rate_ppm_sqrt_s is not None]
+        for s in self.solvers.values():
+            s.iono_rate_network = float(np.mean(rates)) if rates else None
         q = np.concatenate([s.iono_day_q for s in self.solvers.values()])
         level = day_ionosphere_ppm(float(np.sqrt(np.mean(q**2))) if q.size else math.nan, q.size, self.cfg)
         if level is None:

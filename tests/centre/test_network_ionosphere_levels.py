@@ -1,12 +1,15 @@
 """The network engine's integer decisions under the simulator's four ionosphere levels (network-70km, four
 baselines of ~50 km): every fixed DD integer against the truth over a cold start.
 
-The ionosphere prior the baselines start with (1.5 ppm) is a quiet day's; the network then learns the day's
-level from its fixed satellites (`baseline.day_ionosphere_ppm`, pooled over the baselines by
-`NetworkSolver._share_day_ionosphere`) and uses it, lower or higher. Quiet and moderate days fix without a wrong
-integer; an active or storm day does not yet: the first fixes rest on a prior the day disproves (a sample of the
-satellites fixed first is biased low), and BeiDou's B1I/B3I pair (4, 5), 3.6 cm apart in the ionosphere-free
-phase, passes validation. That defect is carried by the strict xfail below with its measured counts.
+The filter's own SD ionosphere prior is wide (10 ppm: a storm's); the prior in force enters the integer decision
+only, as a pseudo-observation: the quiet-day default (1.5 ppm), raised by the ionosphere's measured rate (SD
+geometry-free phase) before anything is committed, then the day's level learned from the fixed satellites over the
+whole network. Before this (2026-11-22, same cold starts at 0/1200/2400 s) an active day fixed wrong BeiDou
+B1I/B3I (4, 5) integers (455-772 of ~39,000 fixed DD ambiguity-epochs) and a storm 6,047 of 19,019, from the
+first fixes at 13 s on: the states had taken the quiet default, their wide lanes were fixed on it, and no
+variance added later undid that. Now every level fixes without a wrong integer; rougher days fix later (first
+fix median over 12 baseline cold starts: quiet 12 s, moderate 12 s, active 17 s, storm 242 s; half of the
+fixable satellites: quiet 27 s, moderate 265 s, active and storm not within 300 s).
 """
 
 from __future__ import annotations
@@ -56,32 +59,18 @@ def _cold_start(level: str, duration_s: int = DURATION_S) -> dict:
     return dict(checked=checked, wrong=sorted(wrong), fraction=fraction, day_ppm=levels)
 
 
-@pytest.mark.parametrize("level", ["quiet", "moderate"])
-def test_quiet_and_moderate_days_fix_without_a_wrong_integer(level):
-    out = _cold_start(level)
-    print(f"\n{level}: {out['checked']} fixed DD ambiguity-epochs, wrong {out['wrong']}, fixed fraction at "
-          f"{DURATION_S} s {out['fraction']}, the day's ionosphere level [ppm] {out['day_ppm']}")
-    assert out["checked"] > 2000
+@pytest.mark.parametrize("level,duration_s,min_checked", [
+    ("quiet", 90, 2000), ("moderate", 90, 200), ("active", 300, 200), ("storm", 300, 100)])
+def test_no_wrong_integer_at_any_ionosphere_level(level, duration_s, min_checked):
+    out = _cold_start(level, duration_s)
+    print(f"\n{level}: {out['checked']} fixed DD ambiguity-epochs in {duration_s} s, wrong {out['wrong']}, fixed "
+          f"fraction at the end {out['fraction']}, the day's ionosphere level [ppm] {out['day_ppm']}")
     assert out["wrong"] == []
-    assert all(v is not None for v in out["day_ppm"].values())
-    assert min(out["fraction"].values()) > 0.3
+    assert out["checked"] >= min_checked  # it does fix, more slowly as the ionosphere gets rougher
 
 
 def test_the_days_level_follows_the_ionosphere():
     quiet = _cold_start("quiet", 40)["day_ppm"]
-    moderate = _cold_start("moderate", 40)["day_ppm"]
+    moderate = _cold_start("moderate", 60)["day_ppm"]
     assert all(v is not None for v in list(quiet.values()) + list(moderate.values()))
     assert max(quiet.values()) < min(moderate.values())
-
-
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "known defect (measured 2026-11-22): on an active or storm day the network fixes wrong integers. Cold starts "
-    "at 0/1200/2400 s, 300 s each: active 3 wrong satellite arcs (BeiDou C01 on NORTH-EAST and SOUTH-WEST, C21 "
-    "on NORTH-WEST, all the B1I/B3I pair (4, 5)), 772 of 39,272 fixed DD ambiguity-epochs; storm 6,047 of "
-    "19,019, from the first fixes at 13 s on. The code before the day's level was learned did the same (455 and "
-    "6,516). Causes: the quiet-day default prior before the first fixes, and a day's level learned from the "
-    "satellites fixed first (biased low); a measured ionosphere rate (SD geometry-free phase) raising the prior "
-    "and the random walk was tried and did not remove the (4, 5) fixes"))
-def test_storm_day_fixes_no_wrong_integer():
-    out = _cold_start("storm", 60)
-    assert out["wrong"] == [], out["wrong"]

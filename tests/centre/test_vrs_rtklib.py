@@ -239,7 +239,8 @@ def test_network_vrs_beats_every_single_base(network70):
     corrections arrive and carries fewer satellites; H95 over all epochs is printed, not compared.)"""
     res = network70["result"]
     assert len(res.epochs) == EPOCHS
-    assert res.network_epochs >= 0.8 * EPOCHS  # the network had corrections for most epochs
+    assert res.network_epochs >= 0.75 * EPOCHS  # corrections for most epochs (79 % since the network waits
+    # for the ionosphere's measured rate and the VRS for 10 corrected satellites; 88 % before)
     for name, fig in network70["figures"].items():
         vrs = fig["VRS"]
         assert vrs["fixed"] >= 0.15 * EPOCHS, name
@@ -259,7 +260,9 @@ def test_must_show_fix_rate_and_accuracy_with_the_vrs(network70):
     processed kinematically from the recording's first epoch (the network starting at the same time): fixed in
     >= 95 % of the epochs after the first fix, H95 <= 2 cm against the truth, no wrong fix. RTKLIB settings:
     CONFIG_VRS (see the module docstring for why, and for the figures with CONFIG). Measured when written:
-    first fix after 94 s, 100 % fixed after it, H95 1.3 cm, no wrong fix (with the network engine of the day:
+    first fix after 94 s, 100 % fixed after it, H95 1.3 cm, no wrong fix; 2026-11-22 (the network measuring the
+    ionosphere's rate before fixing, the VRS in network mode from 10 corrected satellites): first fix after
+    164 s, 100 % after it, H95 0.7 cm, no wrong fix (with the network engine of the day:
     its start-up moves the first fix between 90 and 180 s)."""
     vrs = network70["figures"]["CONFIG_VRS"]["VRS"]
     assert vrs["fixed"] > 0
@@ -271,14 +274,12 @@ def test_must_show_fix_rate_and_accuracy_with_the_vrs(network70):
 @pytest.mark.rtklib
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "not met with the baseline rnx2rtkp settings (measured 2026-11-22, quiet ionosphere; the network engine's "
-    "start-up is being reworked, so the times move): RTKLIB's first fix comes on the first network-corrected VRS "
-    "epoch (24 s), which carries 6 satellites, 4 of them above RTKLIB's 15 degrees: wrong by 76-110 cm for 3 "
-    "epochs; 86.5 % fixed after it, H95 after it 80 cm (of fixed epochs 1.3 cm). Causes: (1) "
-    "augnet/centre/postprocess.py switches the VRS from single-base to network mode at MIN_CORRECTED_SATELLITES = 5 "
-    "satellites over three systems (2-3 double differences); at 8 there is no wrong fix (measured: 92.8 %, no wrong "
-    "fix); (2) RTKLIB 2.4.3 has no partial ambiguity resolution, so every satellite the VRS adds breaks the fix "
-    "for 6-50 s (83-95 % on five recordings); pos2-arlockcnt with fix-and-hold (CONFIG_VRS) handles it"))
+    "not met with the baseline rnx2rtkp settings (measured 2026-11-22, quiet ionosphere, 0.5 Hz, the VRS in "
+    "network mode from 10 corrected satellites): first fix after 144 s, no wrong fix, 81.6 % fixed after it, H95 "
+    "after it 8.7 cm (of fixed epochs 0.7 cm). Earlier figures: with the VRS switching at 5 satellites, a first "
+    "fix on 6 satellites wrong by 76-110 cm and 86.5 %; at 8, 92.8 %. RTKLIB 2.4.3 has no partial ambiguity "
+    "resolution, so every satellite the VRS adds breaks the fix for 6-50 s (83-95 % on five recordings); "
+    "pos2-arlockcnt with fix-and-hold (CONFIG_VRS) handles it: 100 % after its first fix"))
 def test_must_show_with_the_baseline_rtklib_settings(network70):
     vrs = network70["figures"]["CONFIG"]["VRS"]
     assert vrs["fixed"] > 0
