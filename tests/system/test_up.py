@@ -25,7 +25,9 @@ import pytest
 
 from tests.conftest import REPO_ROOT, require_tool
 
-RUN_S = 170.0  # the system's run; both trains fix well within it on this machine (TTFF ~70-100 s)
+RUN_S = 240.0  # the system's run: both trains fix well within it (TTFF 25-50 s); rtkrcv, without partial
+# ambiguity resolution, waits 20 epochs for every satellite the VRS adds while the network fixes more: its first
+# fix came 20-85 s after the start, and once (CI under load, 2026-11-22) not within 170 s
 START_TIMEOUT_S = 60.0
 
 
