@@ -184,6 +184,10 @@ class _Track:
     bad_streak: int = 0
     sd_gf: list = field(default_factory=list)  # recent (t, SD geometry-free phase [m]) of the current arc
 
+    def reset_decisions(self) -> None:
+        """Forget the integer candidates and their confirmation counts."""
+        self.candidate, self.streak = [None, None, None], [0, 0, 0]
+
 
 @dataclass
 class BaselineEpoch:
@@ -312,7 +316,7 @@ class BaselineSolver:
         for table in self.fixed:
             table.pop(sat, None)
         tr = self.tracks[sat]
-        tr.candidate, tr.streak = [None, None, None], [0, 0, 0]
+        tr.reset_decisions()
 
     def _set_reference(self, system: str, new_ref: str) -> None:
         """Switch a system's reference satellite, carrying fixed DD integers over where possible."""
@@ -333,7 +337,7 @@ class BaselineSolver:
             table[old] = -offset
         for s, tr in self.tracks.items():
             if s[0] == system:
-                tr.candidate, tr.streak = [None, None, None], [0, 0, 0]
+                tr.reset_decisions()
 
     # --- one epoch -----------------------------------------------------------------------------
 
@@ -446,7 +450,7 @@ class BaselineSolver:
         level = self.iono_level_ppm
         if rate_known and self._dry_level is not None and level > 1.05 * self._dry_level:
             for tr in self.tracks.values():
-                tr.candidate, tr.streak = [None, None, None], [0, 0, 0]
+                tr.reset_decisions()
         self._dry_level = None if rate_known else level
         ratio = self._fix(sats, rows[el_min[rows] >= cfg.fix_min_elevation_deg], ref_k,
                           self._prior_hints(sats, rows, ref_k, iono_scale, iono_hints), commit=rate_known)
@@ -480,8 +484,8 @@ class BaselineSolver:
     # --- pieces of an epoch --------------------------------------------------------------------
 
     def _learn_ionosphere(self, dt, fixed, ref_k, mapping, dd_iono) -> None:
-        """Running mean square of the fixed satellites' DD ionosphere in the prior's units; the prior for new
-        satellites is raised to `iono_prior_adapt` times its root (a storm day is not a quiet one)."""
+        """This epoch's fixed satellites' DD ionosphere in the prior's units (vertical ppm; `iono_day_q`, which the
+        network pools), their running mean square, and from it this baseline's own day level."""
         cfg = self.cfg
         self.iono_day_q = np.zeros(0)
         if cfg.iono_prior_adapt <= 0 or not fixed.any():
@@ -523,6 +527,10 @@ class BaselineSolver:
         if self._iono_ms is not None and cfg.iono_prior_adapt > 0:
             ppm = max(ppm, cfg.iono_prior_adapt * math.sqrt(self._iono_ms))
         return ppm
+
+    def iono_state_prior_dd(self, sat: str, ref: str) -> float:
+        """The prior variance the DD ionosphere (sat - ref) had in the filter state [m^2] (NaN if unknown)."""
+        return self._iono_p0.get(sat, math.nan) + self._iono_p0.get(ref, math.nan)
 
     @property
     def iono_rate(self) -> float | None:
@@ -595,7 +603,7 @@ class BaselineSolver:
             s, r = str(sats[k]), str(sats[ref_k[k]])
             if s in self.fixed[0] and s in self.fixed[1]:
                 continue
-            old = self._iono_p0.get(s, 0.0) + self._iono_p0.get(r, 0.0)
+            old = self.iono_state_prior_dd(s, r)
             new = max(day * mapping[k] ** 2, floor) + max(day * mapping[ref_k[k]] ** 2, floor)
             if not new < 0.9 * old:
                 continue

@@ -182,9 +182,10 @@ class NetworkSolver:
             alarms=self.integrity.drain())
 
     def _share_day_ionosphere(self) -> None:
-        """The day's ionosphere level from every baseline's fixed satellites at once (in ppm of each baseline's
-        length): a network of four baselines with three satellites fixed on each knows the day's level after the
-        first fixes, where one baseline alone would wait for more."""
+        """The ionosphere's measured rate (mean over the baselines) and the day's level from every baseline's fixed
+        satellites at once (in ppm of each baseline's length), handed to every baseline: a network of four
+        baselines with three satellites fixed on each knows the day's level after the first fixes, where one
+        baseline alone would wait for more."""
         rates = [s.iono_rate_ppm_sqrt_s for s in self.solvers.values() if s.iono_rate_ppm_sqrt_s is not None]
         for s in self.solvers.values():
             s.iono_rate_network = float(np.mean(rates)) if rates else None
@@ -251,8 +252,7 @@ class NetworkSolver:
                         # not fixed there either: the float estimate of a baseline with no station in common
                         # (independent multipath and noise), less its prior (which this baseline has too): in
                         # information form, data = posterior - prior
-                        p0 = self.solvers[e]._iono_p0
-                        vp = p0.get(s, math.nan) + p0.get(ref, math.nan)
+                        vp = self.solvers[e].iono_state_prior_dd(s, ref)
                         v = float(re.iono_float_var_m2[ks])
                         if not v < 0.8 * vp:
                             continue

@@ -21,6 +21,22 @@ def station_epochs(world, block, r: int) -> list[StationEpoch]:
     return out
 
 
+def recorded_streams(duration_s: float, scenario: str = "network-70km"):
+    """A scenario's stations as the RTCM bytes they would stream, every epoch kept: (world, streams, reference
+    station coordinates by id; check receivers left out)."""
+    from stations.rtcm_stream import RtcmStreams
+    from stations.scenario import load_scenario
+    from stations.world import World
+
+    world = World(load_scenario(scenario).model_copy(update={"duration_s": duration_s}))
+    streams = RtcmStreams(world)
+    streams.keep_epochs = True
+    for blk in world.epochs():
+        streams.add(blk)
+    stations = {r.id: r.ecef[0] for r in world.receivers if not r.id.startswith("check")}
+    return world, streams, stations
+
+
 def truth_dd_ambiguity(world, block, e: int, ra: int, rb: int, sat: str, ref: str) -> np.ndarray:
     """Truth DD integer ambiguities (b - a, sat - ref) on the first two signals."""
     idx = {s: j for j, s in enumerate(world.sats)}

@@ -12,20 +12,13 @@ from augnet.centre.ingest import StationDecoder
 from augnet.gnss.geometry import ecef_to_geodetic
 from ntrip_caster.gga import GgaFix
 from ntrip_caster.stream_factory import StreamFactory
-from stations.rtcm_stream import RtcmStreams
-from stations.scenario import load_scenario
-from stations.world import World
+from tests.centre.simdata import recorded_streams
 
 DURATION_S = 20
 
 
 def test_engine_serves_vrs_sessions_from_station_bytes():
-    world = World(load_scenario("network-70km").model_copy(update={"duration_s": DURATION_S}))
-    streams = RtcmStreams(world)
-    streams.keep_epochs = True
-    for blk in world.epochs():
-        streams.add(blk)
-    stations = {r.id: r.ecef[0] for r in world.receivers if not r.id.startswith("check")}
+    world, streams, stations = recorded_streams(DURATION_S)
     engine = CentreEngine(stations, world.t0, network_name="test")
     factory = CentreStreamFactory(engine)
     assert isinstance(factory, StreamFactory)

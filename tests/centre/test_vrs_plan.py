@@ -10,7 +10,7 @@ import pytest
 from augnet.centre.network import NetworkSolver
 from augnet.centre.vrs import VrsPlan, synthesize
 from augnet.gnss.geometry import geodetic_deg_to_ecef
-from tests.centre.simdata import station_epochs
+from tests.centre.simdata import recorded_streams, station_epochs
 from stations.scenario import load_scenario
 from stations.world import World
 
@@ -91,15 +91,9 @@ def test_the_engine_planning_ahead_and_serving_in_groups_sends_the_same_bytes():
     at a time) changes when the work is done, not one byte of any session's stream."""
     from augnet.centre.engine import CentreEngine
     from augnet.gnss.geometry import ecef_to_geodetic
-    from stations.rtcm_stream import RtcmStreams
 
     n = 25
-    world = World(load_scenario("network-70km").model_copy(update={"duration_s": n}))
-    streams = RtcmStreams(world)
-    streams.keep_epochs = True
-    for blk in world.epochs():
-        streams.add(blk)
-    stations = {r.id: r.ecef[0] for r in world.receivers if not r.id.startswith("check")}
+    world, streams, stations = recorded_streams(n)
     pts = _points(9)
     out = []
     for planned in (False, True):

@@ -15,22 +15,14 @@ from augnet.gnss.geometry import ecef_to_geodetic
 from augnet.system.centre_service import CentreService, CentreSpec
 from ntrip_caster.gga import GgaFix
 from ntrip_caster.stream_factory import StreamFactory
-from stations.rtcm_stream import RtcmStreams
-from stations.scenario import load_scenario
-from stations.world import World
+from tests.centre.simdata import recorded_streams
 
 EPOCHS = 12
 
 
 @pytest.fixture(scope="module")
 def recorded():
-    world = World(load_scenario("network-70km").model_copy(update={"duration_s": EPOCHS}))
-    streams = RtcmStreams(world)
-    streams.keep_epochs = True
-    for blk in world.epochs():
-        streams.add(blk)
-    stations = {r.id: r.ecef[0] for r in world.receivers if not r.id.startswith("check")}
-    return world, streams, stations
+    return recorded_streams(EPOCHS)
 
 
 def _fix(ecef) -> GgaFix:
