@@ -10,8 +10,9 @@ from augnet.centre.interpolation import MODEL_CODES, Model, kriging_weights
 from augnet.centre.network import NetworkEpoch
 from augnet.gnss.geometry import ecef_to_enu, geodetic_deg_to_ecef
 
-# The demo line's layout (stations/scenarios/demo.yaml): four stations on a 210 km line ~70 km apart, two off it.
-STATIONS_LAT_LON_DEG = np.array([[39.57, 116.80], [39.85, 116.32], [39.25, 117.46], [38.77, 118.41],
+# The demo line's layout, rounded (stations/scenarios/demo.yaml): the master (km 72), the stations at km 2, 142
+# and 209 of the 210 km line, and the two off it.
+STATIONS_LAT_LON_DEG = np.array([[39.47, 116.97], [39.85, 116.32], [39.10, 117.63], [38.82, 118.31],
                                  [39.80, 117.15], [38.70, 117.30]])
 # Medium-scale travelling ionospheric disturbances: wavelengths 100-500 km (Hernandez-Pajares et al., J. Geophys.
 # Res. 111, 2006); a quiet day's DD ionosphere of 1-4 ppm (network-rtk.md): a few cm over the line.
@@ -21,7 +22,8 @@ SATELLITES = 40
 
 
 def _network(field) -> NetworkEpoch:
-    xyz = geodetic_deg_to_ecef(STATIONS_LAT_LON_DEG[:, 0], STATIONS_LAT_LON_DEG[:, 1], np.zeros(len(STATIONS_LAT_LON_DEG)))
+    lat, lon = STATIONS_LAT_LON_DEG.T
+    xyz = geodetic_deg_to_ecef(lat, lon, np.zeros(len(lat)))
     en = ecef_to_enu(xyz - xyz[0], xyz[0])[:, :2]
     names = [f"S{i}" for i in range(len(en))]
     iono = field(en) - field(en[:1])  # residuals against the master (row 0)
@@ -54,7 +56,7 @@ def test_a_point_between_two_line_stations_gets_the_curvature_along_the_line():
         en = net.station_en_m
         p_en = ecef_to_enu(pts - net.station_xyz_m[0], net.station_xyz_m[0])[:, :2]
         truth = field(p_en) - field(en[:1])
-        plan = vrs.VrsPlan(net, None, 0.0, net.stations)
+        plan = vrs.VrsPlan(net, None, 0.0, net.stations)  # no satellite geometry asked for: no ephemeris needed
         rows = plan.rows_for(pts)
         assert np.all(plan.model[rows] == MODEL_CODES[Model.KRIGING])
         err.append(plan.dI[rows] - truth)
