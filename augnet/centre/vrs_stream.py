@@ -39,6 +39,14 @@ VRS_RECEIVER = "AUGNET VRS"
 FIRMWARE = "1"
 
 
+def _capacity(have: int, need: int, least: int) -> int:
+    """An array axis's new length: unchanged while it holds `need`, else doubled (amortised growth).
+    Each axis grows on its own: doubling the other one too (clients when a satellite-signal key is new,
+    keys when a client is) made the lock-state arrays 2,048 x 8,192 cells for 2,000 clients and ~80
+    keys, 512 MB, and the copies at each doubling stalled the centre for over a second."""
+    return have if need <= have else max(need, 2 * have, least)
+
+
 @dataclass
 class Client:
     """What the stream remembers about one client."""
@@ -90,7 +98,7 @@ class VrsStreamEncoder:
         r0, k0 = self._lock_t0.shape
         if rows <= r0 and keys <= k0:
             return
-        r1, k1 = max(rows, 2 * r0, 16), max(keys, 2 * k0, 64)
+        r1, k1 = _capacity(r0, rows, 16), _capacity(k0, keys, 64)
         t0 = np.full((r1, k1), np.nan)
         off = np.zeros((r1, k1))
         corr = np.full((r1, k1), np.nan)
@@ -139,7 +147,7 @@ class VrsStreamEncoder:
         r0, k0 = self._eph_sent.shape
         if rows <= r0 and sats <= k0:
             return
-        grown = np.full((max(rows, 2 * r0, 16), max(sats, 2 * k0, 64)), -1, dtype=np.int64)
+        grown = np.full((_capacity(r0, rows, 16), _capacity(k0, sats, 64)), -1, dtype=np.int64)
         grown[:r0, :k0] = self._eph_sent
         self._eph_sent = grown
 

@@ -58,3 +58,35 @@ def test_the_vrs_is_flagged_non_physical_and_a_correction_switch_restarts_the_lo
     assert locks[7]["G01"] >= locks[5]["G01"] > 0  # G01 keeps its lock throughout
     assert locks[11]["G01"] > locks[7]["G01"]
     assert locks[8]["G02"] < locks[7]["G02"]  # G02 lost its network corrections at k = 8: lock restarted
+
+
+def _tiled(ep: VrsEpoch, n: int) -> VrsEpoch:
+    """The same epoch for `n` clients."""
+    rep = {k: np.repeat(getattr(ep, k), n, axis=0) for k in ("points_ecef_m", "code_m", "phase_cyc", "cnr_dbhz",
+                                                            "lli", "corrected", "model", "distance_to_master_m")}
+    return VrsEpoch(t_gpst=ep.t_gpst, master=ep.master * n, sats=ep.sats, codes=ep.codes, freq_hz=ep.freq_hz, **rep)
+
+
+def test_clients_joining_keep_the_others_locks_and_grow_only_the_client_axis():
+    enc = VrsStreamEncoder()
+    nav = NavigationData([])
+    ids = ["first"]
+    enc.add("first", 2000, [-2.2e6, 4.4e6, 4.0e6])
+    locks = []
+    for k in range(8):
+        if k >= 2:  # 300 clients join over six epochs: the client axis grows 16 -> 512
+            for j in range(50):
+                cid = f"T{k}-{j}"
+                enc.add(cid, 2001 + len(ids), [-2.2e6, 4.4e6, 4.0e6])
+                ids.append(cid)
+        out = enc.encode(ids, _tiled(_epoch(T0 + k, corrected_g02=True), len(ids)), nav)
+        locks.append(_lock_ms(out["first"]))
+        if k >= 2:
+            assert _lock_ms(out[ids[-1]])["G01"] == 0.0  # a new client's lock starts at its first epoch
+    g01 = [lk["G01"] for lk in locks]
+    assert g01[0] == 0.0 and all(b > a for a, b in zip(g01, g01[1:]))  # never restarted by the growth
+    # the lock state is (clients x satellite-signals): 301 clients and 4 signals must not take the
+    # product of both doublings (2,000 clients once held 2,048 x 8,192 cells, 512 MB)
+    rows, keys = enc._lock_t0.shape
+    assert len(ids) <= rows <= 2 * len(ids) and keys <= 64
+    assert enc._eph_sent.shape[0] <= 2 * len(ids) and enc._eph_sent.shape[1] <= 64
