@@ -11,7 +11,9 @@ connected). Each baseline resolves its own ambiguities (`baseline.py`); the netw
   non-dispersive) of every station against the master: the input of the interpolation;
 - hands each baseline, for the next epoch, ionosphere hints for the satellites it has not fixed: the DD
   ionosphere predicted from the other baselines where they are fixed (a linear model per satellite pair over
-  the network), which separates the wide-lane candidates (0.57-0.8 m of DD ionosphere apart) at once.
+  the network), which separates the wide-lane candidates (0.57-0.8 m of DD ionosphere apart) at once;
+- fits a single-layer ionosphere model over every baseline's fixed satellites (`ionosphere_model`) and hands
+  each baseline its prediction for the satellites not fixed there: the prior of their integer decision.
 """
 
 from __future__ import annotations
@@ -23,7 +25,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from augnet.centre.baseline import BaselineConfig, BaselineEpoch, BaselineSolver, day_ionosphere_ppm
+from augnet.centre.baseline import (BaselineConfig, BaselineEpoch, BaselineSolver, day_ionosphere_ppm,
+                                   rms_upper_bound_factor)
 from augnet.centre.integrity import Alarm, IntegrityMonitor
 from augnet.centre.observations import StationEpoch
 from augnet.centre.satellite_geometry import SatelliteGeometry, satellite_geometry
@@ -31,6 +34,11 @@ from augnet.gnss.ephemeris import NavigationData
 from augnet.gnss.geometry import ecef_to_enu
 
 NEIGHBOURS_PER_STATION = 2
+EARTH_RADIUS_KM = 6371.0  # the single-layer model's sphere (the filter's mapping function uses the same)
+DEFAULT_SHELL_HEIGHT_KM = 350.0  # single-layer height where the config gives none (the filter's default)
+# First-order ionospheric group delay I [m] = 40.3 m^3/s^2 * TEC [el/m^2] / f^2, the standard first-order term
+# (Hofmann-Wellenhof et al., GNSS, 2008, 5.3.2); one TECU is 1e16 el/m^2
+IONO_K_M3_S2 = 40.3e16
 
 
 def choose_baselines(names: list[str], xyz: np.ndarray, k: int = NEIGHBOURS_PER_STATION) -> list[tuple[int, int]]:
@@ -114,6 +122,8 @@ class NetworkSolver:
         self._near = {t: [(e, float(np.linalg.norm(mid[e] - mid[t]))) for e in idx_edges
                           if e != t and np.linalg.norm(mid[e] - mid[t]) <= far] for t in idx_edges}
         self._hints: dict[tuple[int, int], dict] = {}
+        self._model_hints: dict[tuple[int, int], dict] = {}
+        self.iono_model: IonosphereModel | None = None
         self.clocks = {n: 0.0 for n in self.names}
         self.integrity = IntegrityMonitor(self.names)
 
@@ -136,12 +146,14 @@ class NetworkSolver:
             a, b = self.names[i], self.names[j]
             if a in present and b in present:
                 results[(i, j)] = solver.update(epochs[a], epochs[b], nav, geom[a], geom[b], excluded,
-                                                self._hints.get((i, j)))
+                                                self._hints.get((i, j)), self._model_hints.get((i, j)))
             else:
                 results[(i, j)] = None
         misclosures = self._check_closures(results)
         self._share_day_ionosphere()
         self._hints = self._iono_hints(results)
+        self.iono_model = ionosphere_model(results, self._len, self.cfg)
+        self._model_hints = self._model_predictions(results)
         refs = self._network_refs(results)
         sats = np.array(sorted({str(s) for r in results.values() if r is not None for s in r.sats}))
         n = len(self.names)
@@ -277,6 +289,30 @@ class NetworkSolver:
                 hints[t] = out
         return hints
 
+    def _model_predictions(self, results) -> dict[tuple[int, int], dict[str, tuple[str, float, float]]]:
+        """Per baseline, the ionosphere model's DD ionosphere [m] and its variance [m^2] for the satellites high
+        enough to be fixed and not fixed yet (against the baseline's reference). Used for the next epoch."""
+        model = self.iono_model
+        if model is None:
+            return {}
+        out = {}
+        for e, r in results.items():
+            if r is None:
+                continue
+            need = ~r.fixed & (r.eligible if r.eligible is not None else True)
+            if not need.any():
+                continue
+            mean, var = model.predict(r, self._len[e])
+            pos = {str(s): k for k, s in enumerate(r.sats)}
+            hints = {}
+            for k in np.flatnonzero(need & np.isfinite(mean)):
+                s = str(r.sats[k])
+                ref = r.refs.get(s[0])
+                if ref in pos and ref != s:
+                    hints[s] = (ref, float(mean[k]), float(var[k]))
+            out[e] = hints
+        return out
+
     def _network_refs(self, results) -> dict[str, str]:
         """Per system, the satellite fixed on the most baselines (ties: the first baseline's reference)."""
         votes: dict[str, dict[str, int]] = {}
@@ -336,3 +372,86 @@ class NetworkSolver:
                             r.dd_iono_m[q] = np.nan
                             r.dd_trop_m[q] = np.nan
         return bad
+
+
+
+@dataclass(frozen=True)
+class IonosphereModel:
+    """The network's single-layer ionosphere model of the DD ionosphere: a vertical TEC `vtec_tecu` on a shell at
+    `iono_shell_height_km`, which a satellite's DD ionosphere holds through the difference of the two stations'
+    mapping functions (b minus a, satellite minus reference; a 50 km baseline across the satellite's azimuth
+    changes its elevation by ~0.45 degree, at 15 degrees the mapping function by ~1 %: 0.5 TECU, 8 cm on L1, of
+    17 TECU), plus a residual (the TEC's gradients between the pierce points) of `level_ppm` [ppm of the
+    baseline length, vertical, mapped with hypot(M_s, M_ref) like the day's level]: the 95 % upper bound of the
+    fit's residual RMS times `iono_prior_adapt`, never below `iono_model_floor_ppm`."""
+
+    vtec_tecu: float
+    vtec_var_tecu2: float
+    level_ppm: float
+    n: int  # fixed DD ionospheres it was fitted on
+    shell_km: float
+
+    def predict(self, r: BaselineEpoch, length_m: float) -> tuple[np.ndarray, np.ndarray]:
+        """A baseline's DD ionosphere on f1 [m] and its variance [m^2] for each of its satellites against its
+        reference (NaN where the system has no reference)."""
+        d, m, mr = _mapping_terms(r, self.shell_km)
+        tecu_m = IONO_K_M3_S2 / r.freq_hz[:, 0] ** 2  # metres of f1 delay per TECU
+        mean = d * self.vtec_tecu * tecu_m
+        spread = self.level_ppm * 1e-6 * length_m * np.hypot(m, mr)
+        return mean, spread**2 + (d * tecu_m) ** 2 * self.vtec_var_tecu2
+
+
+def _mapping(el_deg: np.ndarray, shell_km: float) -> np.ndarray:
+    r = EARTH_RADIUS_KM / (EARTH_RADIUS_KM + shell_km)
+    return 1.0 / np.sqrt(1.0 - (r * np.cos(np.radians(el_deg))) ** 2)
+
+
+def _mapping_terms(r: BaselineEpoch, shell_km: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per satellite of a baseline epoch: the DD of the stations' mapping functions (b - a, satellite - its
+    reference; NaN without a reference), and the mapping function at the lower station of the satellite and of
+    its reference (the scale of the day's level)."""
+    ma, mb = _mapping(r.elevation_a_deg, shell_km), _mapping(r.elevation_b_deg, shell_km)
+    low = np.maximum(ma, mb)
+    pos = {str(s): k for k, s in enumerate(r.sats)}
+    kr = np.array([pos.get(r.refs.get(str(s)[0]), -1) for s in r.sats])
+    has = kr >= 0
+    kr = np.where(has, kr, 0)
+    sd = mb - ma
+    return np.where(has, sd - sd[kr], np.nan), low, np.where(has, low[kr], np.nan)
+
+
+def ionosphere_model(results: dict, lengths: dict, cfg: BaselineConfig) -> IonosphereModel | None:
+    """Fit the vertical TEC of the single-layer model over every baseline's fixed satellites by weighted least
+    squares (each DD ionosphere weighted by the day level's scale, L * hypot(M_s, M_ref)); the residual's level
+    in ppm. None without `iono_model_min_dd` fixed DD ionospheres, or when the model is off."""
+    if cfg.iono_model_floor_ppm <= 0:
+        return None
+    shell = cfg.iono_shell_height_km or DEFAULT_SHELL_HEIGHT_KM
+    ys, ds, ss = [], [], []
+    for e, r in results.items():
+        if r is None:
+            continue
+        fixed = r.fixed & ~r.is_reference() & np.isfinite(r.dd_iono_m)
+        if not fixed.any():
+            continue
+        d, m, mr = _mapping_terms(r, shell)
+        tecu_m = IONO_K_M3_S2 / r.freq_hz[:, 0] ** 2
+        scale = 1e-6 * lengths[e] * np.hypot(m, mr) / tecu_m  # TECU per ppm
+        ok = fixed & np.isfinite(d)
+        ys.append(r.dd_iono_m[ok] / tecu_m[ok])
+        ds.append(d[ok])
+        ss.append(scale[ok])
+    if not ys:
+        return None
+    y, d, s = np.concatenate(ys), np.concatenate(ds), np.concatenate(ss)
+    n = y.size
+    if n < max(cfg.iono_model_min_dd, 2):
+        return None
+    a = d / s
+    info = float(a @ a)
+    if not info > 0:
+        return None
+    v = float(a @ (y / s)) / info
+    rms = math.sqrt(float(np.sum((y / s - a * v) ** 2)) / (n - 1))
+    level = max(cfg.iono_model_floor_ppm, cfg.iono_prior_adapt * rms * rms_upper_bound_factor(n - 1))
+    return IonosphereModel(vtec_tecu=v, vtec_var_tecu2=level**2 / info, level_ppm=level, n=n, shell_km=shell)
