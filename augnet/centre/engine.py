@@ -107,6 +107,7 @@ class CentreEngine:
         self.after_serve: Callable[[bool], None] | None = None
         self.serve_group: int | None = None
         self._plan: VrsPlan | None = None  # the next epoch's VRS, all but the observations (prepare_next)
+        self._unplanned: dict[str, None] = {}  # sessions opened or moved since the plan was made
         self._last_eps: dict = {}
         self._interval_s = 1.0
 
@@ -145,6 +146,7 @@ class CentreEngine:
         s = Session(client_id, sink, point, sid)
         self.sessions[client_id] = s
         self.encoder.add(client_id, sid, point)
+        self._unplanned[client_id] = None
         return s
 
     def move_session(self, client_id: str, lat_deg: float, lon_deg: float, h_m: float) -> None:
@@ -153,6 +155,7 @@ class CentreEngine:
             return
         s.point_ecef = geodetic_deg_to_ecef(lat_deg, lon_deg, h_m)
         self.encoder.move(client_id, s.point_ecef)
+        self._unplanned[client_id] = None
 
     def close_session(self, client_id: str) -> None:
         self.sessions.pop(client_id, None)
@@ -238,7 +241,9 @@ class CentreEngine:
         """Build the next epoch's VRS plan now (the sessions' masters, interpolated corrections and
         geometry from the latest network epoch; `VrsPlan`), while the centre waits for that epoch's data:
         then only the observations are added when it arrives. It assumes the next epoch one interval on,
-        with the same stations; if not, or for a client that moved meanwhile, the VRS are planned then."""
+        with the same stations; if not, the VRS are planned then. Sessions opened or moved after it are
+        added by `update_plan`."""
+        self._unplanned.clear()
         ne = self._prev
         if ne is None or not self.sessions or not self.vrs_before_network:
             self._plan = None
@@ -250,6 +255,16 @@ class CentreEngine:
         plan.add_sats(sorted({str(s) for e in eps.values() for s in e.sats} - set(ne.excluded)))
         plan.prepare_stations()
         self._plan = plan
+
+    def update_plan(self) -> None:
+        """Plan the sessions opened or moved since `prepare_next` (their masters, corrections and geometry
+        at the new points), in one batch, while the centre still waits for the epoch: otherwise the epoch's
+        synthesis does it, on the correction age's path (the load test's trains report their GGA together,
+        so hundreds of them move between two epochs)."""
+        plan, ids = self._plan, [c for c in self._unplanned if c in self.sessions]
+        self._unplanned.clear()
+        if plan is not None and ids:
+            plan.rows_for(np.array([self.sessions[c].point_ecef for c in ids]), ids)
 
     def drain_outbox(self) -> list[tuple[str, bytes]]:
         out, self.outbox = self.outbox, []

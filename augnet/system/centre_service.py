@@ -18,7 +18,9 @@ arrays without copies of its own):
   loop -> centre, one frame per loop iteration holding a list of commands in the order they happened:
     ("data", station, rtcm_bytes, arrival_unix_s)   bytes of a station's stream as the caster got them
     ("open", client_id, lat_deg, lon_deg, h_m)       a VRS session (the client's first usable GGA)
-    ("move", client_id, lat_deg, lon_deg, h_m)       the client moved (the caster's reposition policy)
+    ("move", client_id, lat_deg, lon_deg, h_m)       the client moved (the caster's reposition policy);
+                                                     opened and moved sessions are added to the next
+                                                     epoch's plan between epochs (`PLAN_UPDATE_S`)
     ("close", client_id)
     ("written", t_gpst)                              the last group of epoch t's VRS is written to the
                                                      sockets: the centre may solve the network
@@ -30,7 +32,8 @@ arrays without copies of its own):
         the sessions' epoch t, in groups of `VRS_GROUP` sessions each sent as soon as it is encoded (the
         loop writes one group while the centre encodes the next), all before the network solves t: the
         solve waits for "written" (at most `WRITTEN_WAIT_S`), so on two cores it does not take a core
-        from the delivery
+        from the delivery. On the loop, `delivering()` is true from the first group written to the last
+        (other work on the loop, the onboard trains', waits for it), then `on_written(t)` runs
     ("epoch", [EpochReport, ...], [(bus subject, payload), ...], solve_s, sessions)
         the solved epochs (their `vrs` arrays left behind: `vrs_models` carries what the console shows),
         the correction models and alarms for the bus
@@ -75,9 +78,13 @@ VRS_GROUP = 500
 WRITTEN_WAIT_S = 0.2  # the network solve waits this long at most for the loop to write an epoch's VRS
 SOCKET_BUFFER_BYTES = 4 << 20
 TICK_S = 0.02  # the centre looks for timed-out epochs this often (a complete epoch is solved on arrival)
+# sessions opened or moved are added to the next epoch's plan this often, in one batch (a batch costs ~1 ms
+# whatever its size: 2,000 trains reporting a GGA every 5 s move 200 points a second, one or two at a time)
+PLAN_UPDATE_S = 0.1
 STOP_TIMEOUT_S = 5.0
 HEARTBEAT_S = 1.0  # the centre sends at least this often ("alive" when it has nothing else)
 HANG_S = 20.0  # a centre silent this long is taken for hung: killed, reported and replaced
+MAX_DELIVERY_S = 1.0  # `delivering` stays true this long at most (an epoch whose last group never came)
 RESTART_DELAY_S = 1.0
 MAX_RESTARTS = 5  # per run: a centre that keeps dying stays down (its alarm stays raised)
 _HEAD = struct.Struct(">I")
@@ -178,8 +185,10 @@ class CentreService:
 
     def __init__(self, spec: CentreSpec, loop: asyncio.AbstractEventLoop,
                  on_epoch: Callable | None = None, on_outbox: Callable[[list[tuple[str, bytes]]], None] | None = None,
-                 on_alarm: Callable[[str, str, str, str, bool], None] | None = None, hang_s: float = HANG_S):
+                 on_alarm: Callable[[str, str, str, str, bool], None] | None = None, hang_s: float = HANG_S,
+                 on_written: Callable[[float], None] | None = None):
         self.spec = spec
+        self.on_written = on_written  # called (soon) after an epoch's last VRS group is written: on_written(t)
         self.hang_s = hang_s
         self.loop = loop
         self.on_epoch = on_epoch
@@ -202,10 +211,17 @@ class CentreService:
         self._gps_minus_unix = gtime.now_gpst() - time.time()
         self._last_heard = 0.0  # loop time of the centre's last message
         self._watchdog: asyncio.Task | None = None
+        self._delivering_since: float | None = None  # loop time an epoch's first group was written
 
     @property
     def stations(self) -> list[str]:
         return list(self.spec.stations)
+
+    def delivering(self) -> bool:
+        """True while an epoch's VRS are being written to the sinks: its first group is, its last is not yet
+        (other work on the loop can wait for `on_written`; true for `MAX_DELIVERY_S` at most)."""
+        since = self._delivering_since
+        return since is not None and self.loop.time() - since < MAX_DELIVERY_S
 
     @property
     def alive(self) -> bool:
@@ -324,6 +340,7 @@ class CentreService:
         if channel is not self._channel:
             return
         self._channel = None
+        self._delivering_since = None
         if self._stopping:
             return
         self.errors += 1
@@ -388,6 +405,11 @@ class CentreService:
                 sink(data)
         if last:
             self._send(("written", t_gpst))
+            self._delivering_since = None
+            if self.on_written is not None:
+                self.loop.call_soon(self.on_written, t_gpst)
+        elif self._delivering_since is None:
+            self._delivering_since = self.loop.time()
         sent = time.time() + off - t_gpst
         ready = ready_unix + off - t_gpst
         cost = cost or (np.nan, np.nan, np.nan, np.nan)
@@ -510,7 +532,7 @@ class _CentreWorker:
     def run(self) -> None:
         try:
             self.send(("ready", os.getpid()))
-            next_tick = time.monotonic()
+            next_tick = next_plan_update = time.monotonic()
             while not self._broken:
                 timeout = 0.0 if self._inbox else max(0.0, next_tick - time.monotonic())
                 readable = self._read(timeout)
@@ -523,6 +545,9 @@ class _CentreWorker:
                     self._tick()
                     if time.monotonic() >= next_tick:
                         next_tick = time.monotonic() + TICK_S
+                if time.monotonic() >= next_plan_update:  # after the tick: never before an epoch that is ready
+                    self._update_plan()
+                    next_plan_update = time.monotonic() + PLAN_UPDATE_S
                 if time.monotonic() - self._last_sent >= HEARTBEAT_S:
                     self.send(("alive",))
         except OSError:
@@ -575,6 +600,13 @@ class _CentreWorker:
                 eng.close_session(cmd[1])
         except Exception:  # noqa: BLE001 - bad input never stops the centre: reported, then ignored
             self._error(f"{cmd[0]} failed")
+
+    def _update_plan(self) -> None:
+        """Sessions opened or moved meanwhile get their place in the next epoch's plan now, between epochs."""
+        try:
+            self.engine.update_plan()
+        except Exception:  # noqa: BLE001 - the epoch's synthesis plans them instead
+            self._error("planning moved sessions failed")
 
     def _tick(self) -> None:
         eng = self.engine

@@ -180,7 +180,7 @@ class System:
         # centre (its own process, started below once the caster taps are in place)
         spec = CentreSpec({k: tuple(float(x) for x in v) for k, v in station_xyz.items()}, world.t0, sc.name)
         self.centre = CentreService(spec, loop, on_epoch=self._on_epoch, on_outbox=self._on_outbox,
-                                    on_alarm=self._alarm)
+                                    on_alarm=self._alarm, on_written=self._on_vrs_written)
         for code, on in enabled.items():
             if not on:
                 self.centre.set_station_enabled(code, False)
@@ -227,7 +227,8 @@ class System:
         track_db = TrackDatabase.from_dict(db_dict) if db_dict else None
         for rx in train_rx:
             tr = OnboardTrain(rx.id, lambda: world.nav, track_db, "127.0.0.1", port, VRS_MOUNT,
-                              user=TRAIN_USER, password=pw_train, on_output=self._on_train_output)
+                              user=TRAIN_USER, password=pw_train, on_output=self._on_train_output,
+                              hold=self.centre.delivering)
             self.caster.tap(mountpoint_of("train", rx.id), tr.on_rover_bytes)
             tr.start()
             self.trains[rx.id] = tr
@@ -332,6 +333,11 @@ class System:
             await self.bus.publish(subject, payload)
         except Exception:  # noqa: BLE001 - a bus outage must not stop the centre; counted by the bus
             log.warning("bus publish to %s failed", subject)
+
+    def _on_vrs_written(self, t_gpst: float) -> None:
+        """Every client has the epoch's VRS: the onboard trains, held meanwhile, process theirs."""
+        for tr in self.trains.values():
+            tr.resume()
 
     def _on_epoch(self, r: EpochReport, done_at: float) -> None:
         self.last_report = r

@@ -9,6 +9,12 @@ Pairing: a rover epoch is processed with the VRS epoch of the same time tag when
 `MAX_BASE_WAIT_S` (the centre needs a few hundred ms to solve and synthesise); otherwise with the
 latest VRS epoch (the RTK filter extrapolates, and reports the age).
 
+These trains share the event loop with the caster, and an RTK epoch is tens of ms of Python: run as soon as
+their own VRS arrived (in the first group the caster writes), it held back the writing of every other
+train's VRS of the epoch. `hold` (the centre service's `delivering`) defers the processing until the caster
+has written the epoch's VRS to every client; `resume` then catches up. On a real train it has a computer of
+its own.
+
 A repositioned VRS (same session, same RTCM station id) keeps the filter's ambiguities: the centre keeps
 the VRS phase continuous while the master station stays the same, and restarts every lock (the rover
 sees a slip on every satellite) when it changes. A different station id is a new base: reset.
@@ -20,6 +26,7 @@ import asyncio
 import collections
 import math
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
@@ -55,8 +62,9 @@ class TrainStats:
 class OnboardTrain:
     def __init__(self, train_id: str, nav_source, track_db: TrackDatabase | None, host: str, port: int,
                  vrs_mount: str, *, user: str = "", password: str = "", on_output=None,
-                 integrity_risk: float = DEFAULT_INTEGRITY_RISK):
+                 integrity_risk: float = DEFAULT_INTEGRITY_RISK, hold: Callable[[], bool] | None = None):
         self.id = train_id
+        self.hold = hold  # () -> True while the caster writes an epoch's VRS: processing waits for `resume`
         self.nav_source = nav_source  # () -> NavigationData: the broadcast ephemerides the receiver decoded
         self.track_db = track_db
         self.sink = ListSink()
@@ -101,7 +109,13 @@ class OnboardTrain:
             self.last_base = ep
         self._drain(now)
 
+    def resume(self) -> None:
+        """The caster has written the epoch's VRS: process what waited."""
+        self._drain(gtime.now_gpst())
+
     def _drain(self, now: float) -> None:
+        if self.hold is not None and self.hold():
+            return
         while self.rover_queue:
             ep, arrived = self.rover_queue[0]
             if round(ep.time, 3) in self.bases or now - arrived >= MAX_BASE_WAIT_S:

@@ -87,8 +87,9 @@ def test_a_plan_that_does_not_fit_is_not_used(solved):
 
 
 def test_the_engine_planning_ahead_and_serving_in_groups_sends_the_same_bytes():
-    """What the centre process does (plan each next epoch after the solve, encode the sessions a group
-    at a time) changes when the work is done, not one byte of any session's stream."""
+    """What the centre process does (plan each next epoch after the solve, and sessions moved or opened
+    meanwhile before the epoch comes; encode the sessions a group at a time) changes when the work is done,
+    not one byte of any session's stream."""
     from augnet.centre.engine import CentreEngine
     from augnet.gnss.geometry import ecef_to_geodetic
 
@@ -112,6 +113,11 @@ def test_the_engine_planning_ahead_and_serving_in_groups_sends_the_same_bytes():
                 eng.close_session("c5")
                 lat, lon, h = ecef_to_geodetic(pts[5])
                 eng.open_session("c9", np.degrees(lat), np.degrees(lon), h, got.setdefault(9, bytearray()).extend)
+                if planned:  # as the centre process does between epochs: the moved and the new one planned now
+                    plan = eng._plan
+                    eng.update_plan()
+                    for cid in ("c0", "c9"):
+                        np.testing.assert_array_equal(plan.points[plan.keys[cid]], eng.sessions[cid].point_ecef)
             for name in stations:
                 eng.feed(name, streams.epoch_bytes[name][e][1], float(e))
             eng.tick(e + 1.0)

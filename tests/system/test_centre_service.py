@@ -12,7 +12,7 @@ import pytest
 
 from augnet.centre.ingest import StationDecoder
 from augnet.gnss.geometry import ecef_to_geodetic
-from augnet.system.centre_service import CentreService, CentreSpec
+from augnet.system.centre_service import MAX_DELIVERY_S, CentreService, CentreSpec
 from ntrip_caster.gga import GgaFix
 from ntrip_caster.stream_factory import StreamFactory
 from tests.centre.simdata import recorded_streams
@@ -182,5 +182,37 @@ def test_a_centre_that_stops_answering_is_killed_reported_and_replaced(recorded)
         await _feed(svc, streams, stations, range(0, 3), 0.05)
         await _until(lambda: len(epochs) >= 2)
         await svc.stop()
+
+    asyncio.run(main())
+
+
+def test_delivering_lasts_from_an_epochs_first_vrs_group_to_its_last(recorded):
+    """What the onboard trains on the loop wait for: the caster writing an epoch's VRS (its groups arrive
+    one message each, the last flagged) to every client; then `on_written` runs."""
+    world, _, stations = recorded
+    check = world.receivers[world.receiver_ids.index("check1")].ecef[0]
+
+    async def main():
+        written = []
+        svc, _, _ = _service(world, stations, on_written=written.append)
+        got = {cid: bytearray() for cid in ("VRS/1", "VRS/2")}
+        for cid, sink in got.items():
+            svc.open(cid, "VRS", _fix(check), sink.extend)
+        t = world.t0 + 5.0
+        assert not svc.delivering()
+        svc._on_message(("vrs", t, [("VRS/1", b"one")], time.time(), None, None, False))
+        assert svc.delivering() and got["VRS/1"] == b"one" and not got["VRS/2"]
+        await asyncio.sleep(0.01)
+        assert written == [] and svc.delivering()
+        svc._on_message(("vrs", t, [("VRS/2", b"two")], time.time(), None, None, True))
+        assert not svc.delivering() and got["VRS/2"] == b"two"
+        await asyncio.sleep(0.01)
+        assert written == [t]
+        assert svc.timings.stages[-1][1] == 2  # one epoch of two sessions in the figures
+        # an epoch whose last group never comes does not hold the others for ever
+        svc._on_message(("vrs", t + 1.0, [("VRS/1", b"three")], time.time(), None, None, False))
+        assert svc.delivering()
+        svc._delivering_since -= MAX_DELIVERY_S + 0.1  # as if that long had passed
+        assert not svc.delivering()
 
     asyncio.run(main())
