@@ -45,6 +45,7 @@ class TrainSpec:
     start_m: float  # chainage at t = 0
     speed_m_s: float
     direction: int
+    gga_phase_s: float = 0.0  # when in each GGA interval this train reports
 
 
 class TrainClient(LoadClient):
@@ -83,6 +84,10 @@ class TrainClient(LoadClient):
         return format_gga(lat, lon, 30.0)
 
     async def report_positions(self) -> None:
+        # each train at its own moment of the interval, as independent trains would: all reporting in the
+        # same millisecond made the caster move hundreds of VRS points at once and stalled this process's
+        # loop (formatting a thousand GGA) while it stamped arrivals
+        await asyncio.sleep(self.train.gga_phase_s)
         while not self.closed:
             await asyncio.sleep(GGA_INTERVAL_S)
             if self.transport is not None and not self.closed and self.head_done:
@@ -123,7 +128,8 @@ def train_specs(host: str, port: int, mount: str, n: int, user: str, password: s
         k = offset + i
         start = (k * 0.6180339887 % 1.0) * line.length_m  # golden-ratio spacing: evenly spread
         train = TrainSpec(ClientSpec(host, port, mount, 2 if k % 2 else 1, user, password), start,
-                          SPEEDS_KMH[k % len(SPEEDS_KMH)] / 3.6, 1 if k % 4 < 2 else -1)
+                          SPEEDS_KMH[k % len(SPEEDS_KMH)] / 3.6, 1 if k % 4 < 2 else -1,
+                          (k * 0.7548776662 % 1.0) * GGA_INTERVAL_S)  # spread evenly (another irrational)
         lat, lon = line.at(start)
         train.spec.gga = format_gga(lat, lon, 30.0)
         out.append(train)

@@ -69,3 +69,18 @@ def test_a_new_station_is_registered_enabled_and_an_operators_decision_stands(tm
     with sessions.begin() as s:
         assert persistence.register_station(s, "STA1", "STA1", xyz, 101, "STA1") is False
         assert persistence.station_enabled_map(s) == {"STA1": False}
+
+
+def test_load_test_trains_report_their_positions_spread_over_the_interval():
+    """Independent trains do not all send their GGA in the same millisecond (which would move every VRS
+    point at once and stall the load test's own loop while it stamps arrivals)."""
+    import numpy as np
+
+    from augnet.system.loadtest import GGA_INTERVAL_S, LinePoints, train_specs
+
+    line = LinePoints([[39.0, 116.0, 0.0], [39.5, 116.5, 0.0]], 70_000.0)
+    specs = train_specs("127.0.0.1", 2101, "VRS", 1000, "train", "pw", line)
+    phases = np.array([t.gga_phase_s for t in specs])
+    assert phases.min() >= 0.0 and phases.max() < GGA_INTERVAL_S
+    counts, _ = np.histogram(phases, bins=10, range=(0.0, GGA_INTERVAL_S))
+    assert counts.min() >= 90 and counts.max() <= 110  # about 100 trains in every tenth of the interval
