@@ -535,13 +535,15 @@ class _CentreWorker:
             next_tick = next_plan_update = time.monotonic()
             while not self._broken:
                 timeout = 0.0 if self._inbox else max(0.0, next_tick - time.monotonic())
-                readable = self._read(timeout)
+                self._read(timeout)
+                fed = False  # station data came: an epoch may be complete (moves alone complete none)
                 while self._inbox:
                     cmd = self._inbox.popleft()
                     if cmd[0] == "stop":
                         return
+                    fed = fed or cmd[0] == "data"
                     self._apply(cmd)
-                if readable or time.monotonic() >= next_tick:
+                if fed or time.monotonic() >= next_tick:
                     self._tick()
                     if time.monotonic() >= next_tick:
                         next_tick = time.monotonic() + TICK_S
