@@ -52,6 +52,7 @@ from augnet.gnss import combinations as comb
 from augnet.gnss.ambiguity import AmbiguityError, partial_fix
 from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
 from augnet.gnss.ephemeris import NavigationData
+from augnet.gnss.ionosphere import thin_shell_mapping
 
 C = SPEED_OF_LIGHT_M_S
 FREQS = 2  # dual-frequency network processing
@@ -291,8 +292,7 @@ class BaselineSolver:
         """Slant over vertical ionosphere (single layer), or ones without a shell height."""
         if self.cfg.iono_shell_height_km is None:
             return np.ones_like(el_rad)
-        r = 6371.0 / (6371.0 + self.cfg.iono_shell_height_km)
-        return 1.0 / np.sqrt(1.0 - (r * np.cos(el_rad)) ** 2)
+        return thin_shell_mapping(el_rad, 1e3 * self.cfg.iono_shell_height_km)
 
     def _add_states(self, sat: str, iono_m: float, n1: float, n2: float, mp_code_var_m2: float,
                     mp_phase_var_m2: float, iono_var_scale: float = 1.0) -> None:

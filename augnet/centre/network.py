@@ -31,14 +31,10 @@ from augnet.centre.integrity import Alarm, IntegrityMonitor
 from augnet.centre.observations import StationEpoch
 from augnet.centre.satellite_geometry import SatelliteGeometry, satellite_geometry
 from augnet.gnss.ephemeris import NavigationData
+from augnet.gnss.ionosphere import IONO_K_M3_S2, SHELL_HEIGHT_M, thin_shell_mapping
 from augnet.gnss.geometry import ecef_to_enu
 
 NEIGHBOURS_PER_STATION = 2
-EARTH_RADIUS_KM = 6371.0  # the single-layer model's sphere (the filter's mapping function uses the same)
-DEFAULT_SHELL_HEIGHT_KM = 350.0  # single-layer height where the config gives none (the filter's default)
-# First-order ionospheric group delay I [m] = 40.3 m^3/s^2 * TEC [el/m^2] / f^2, the standard first-order term
-# (Hofmann-Wellenhof et al., GNSS, 2008, 5.3.2); one TECU is 1e16 el/m^2
-IONO_K_M3_S2 = 40.3e16
 
 
 def choose_baselines(names: list[str], xyz: np.ndarray, k: int = NEIGHBOURS_PER_STATION) -> list[tuple[int, int]]:
@@ -401,16 +397,12 @@ class IonosphereModel:
         return mean, spread**2 + (d * tecu_m) ** 2 * self.vtec_var_tecu2
 
 
-def _mapping(el_deg: np.ndarray, shell_km: float) -> np.ndarray:
-    r = EARTH_RADIUS_KM / (EARTH_RADIUS_KM + shell_km)
-    return 1.0 / np.sqrt(1.0 - (r * np.cos(np.radians(el_deg))) ** 2)
-
-
 def _mapping_terms(r: BaselineEpoch, shell_km: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per satellite of a baseline epoch: the DD of the stations' mapping functions (b - a, satellite - its
     reference; NaN without a reference), and the mapping function at the lower station of the satellite and of
     its reference (the scale of the day's level)."""
-    ma, mb = _mapping(r.elevation_a_deg, shell_km), _mapping(r.elevation_b_deg, shell_km)
+    ma = thin_shell_mapping(np.radians(r.elevation_a_deg), 1e3 * shell_km)
+    mb = thin_shell_mapping(np.radians(r.elevation_b_deg), 1e3 * shell_km)
     low = np.maximum(ma, mb)
     pos = {str(s): k for k, s in enumerate(r.sats)}
     kr = np.array([pos.get(r.refs.get(str(s)[0]), -1) for s in r.sats])
@@ -426,7 +418,7 @@ def ionosphere_model(results: dict, lengths: dict, cfg: BaselineConfig) -> Ionos
     in ppm. None without `iono_model_min_dd` fixed DD ionospheres, or when the model is off."""
     if cfg.iono_model_floor_ppm <= 0:
         return None
-    shell = cfg.iono_shell_height_km or DEFAULT_SHELL_HEIGHT_KM
+    shell = cfg.iono_shell_height_km or SHELL_HEIGHT_M / 1e3  # the filter's default where the config has none
     ys, ds, ss = [], [], []
     for e, r in results.items():
         if r is None:

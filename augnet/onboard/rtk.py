@@ -59,6 +59,7 @@ from augnet.gnss.ambiguity import (
     search,
 )
 from augnet.gnss.ephemeris import NavigationData
+from augnet.gnss.ionosphere import thin_shell_mapping
 from augnet.onboard.atmosphere import saastamoinen_m
 from augnet.onboard.cycleslip import BASE_GF_DRIFT_M_S, BASE_GF_SLIP_THRESHOLD_M, SlipDetector
 from augnet.onboard.observations import BAND_FREQ_HZ, SYSTEM_BANDS, EpochObs
@@ -192,9 +193,6 @@ IONO_ESTIMATE_MIN_SIGMA_M = 0.015
 # Random walk of the SD ionosphere, as a fraction of sigma0 per sqrt(s): a 2 cm VRS residual may drift
 # by ~1 cm over 100 s (the interpolation error changes with the satellites' pierce points).
 IONO_PROCESS_FRACTION_PER_SQRT_S = 0.03
-# Thin ionospheric shell (Klobuchar's and the centre's): height [m] and the Earth's mean radius [m].
-IONO_SHELL_HEIGHT_M = 350_000.0
-EARTH_MEAN_RADIUS_M = 6_371_000.0
 # With the ionosphere in the model, a validated fix is declared only when the same integers have been
 # found in this many consecutive epochs (a biased float can pass one epoch's tests by chance).
 CONFIRM_EPOCHS_WITH_IONOSPHERE = 3
@@ -274,12 +272,6 @@ class _DD:
     iref: np.ndarray
     ion: np.ndarray | None
     ion_ref: np.ndarray | None
-
-
-def iono_mapping(el_rad) -> np.ndarray:
-    """Thin-shell ionospheric mapping function (slant / vertical delay) at elevation el."""
-    s = EARTH_MEAN_RADIUS_M / (EARTH_MEAN_RADIUS_M + IONO_SHELL_HEIGHT_M) * np.cos(np.asarray(el_rad, dtype=float))
-    return 1.0 / np.sqrt(1.0 - s * s)
 
 
 def _first_wavelength(system: str) -> float:
@@ -634,7 +626,7 @@ class RtkFilter:
             if key not in self.amb_index:
                 self._new_amb(key, obs_sd_cyc[k, f], INIT_AMBIGUITY_SIGMA_CYC**2)
         if self.iono_active:
-            mapping = iono_mapping(el_r)
+            mapping = thin_shell_mapping(el_r)
             for k in np.flatnonzero(ok.any(axis=1)):
                 if sats[k] not in self.ion_index:
                     self._new_ion(sats[k], (sigma0 * mapping[k]) ** 2, t)

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from augnet.centre.network import NetworkSolver
+from augnet.gnss.ionosphere import IONO_K_M3_S2
 from stations.scenario import load_scenario
 from stations.world import World
 from tests.centre.simdata import station_epochs, truth_dd_ambiguity
@@ -33,7 +34,6 @@ SHARES = (0.5, 0.8)  # fixed share of the fixable satellites for the cold-start 
 
 MODEL_CHECK_EVERY_S = 10
 LOW_DEG = 20.0  # "low": the satellites the model is for, 15-20 degrees at the lower station
-IONO_K_M3_S2 = 40.3e16  # first-order ionospheric delay: I [m] = K * TEC [TECU] / f^2
 
 
 def _rms(v) -> float:

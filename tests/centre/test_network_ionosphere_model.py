@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from augnet.centre.baseline import BaselineConfig, BaselineEpoch
-from augnet.centre.network import IONO_K_M3_S2, ionosphere_model
+from augnet.centre.network import ionosphere_model
+from augnet.gnss.ionosphere import IONO_K_M3_S2, thin_shell_mapping
 
 F1_HZ = 1575.42e6
 LENGTH_M = 50_000.0
@@ -18,8 +19,7 @@ RESIDUAL_PPM = 0.4  # the quiet day's level after the model (network-70km, measu
 
 
 def _mapping(el_deg):
-    r = 6371.0 / (6371.0 + SHELL_KM)
-    return 1.0 / np.sqrt(1.0 - (r * np.cos(np.radians(el_deg))) ** 2)
+    return thin_shell_mapping(np.radians(el_deg), 1e3 * SHELL_KM)
 
 
 def _baseline(rng, n_sats: int, fixed_share: float, vtec: float) -> tuple[BaselineEpoch, np.ndarray, np.ndarray]:
