@@ -300,24 +300,20 @@ class Scenario(_Strict):
 # baseline is ~1-4 ppm (quiet, moderate) and 10-20 ppm (storm), the figures in network-rtk.md; the test
 # `test_dd_ionosphere_level` measures them (stations/README.md has the table).
 #
-# quiet (recalibrated 2026-11): the medium-scale irregularity field is a standard deviation of 0.2 TECU
-# (a sinusoid of ~0.28 TECU amplitude; +-2 sigma = 0.8 TECU peak to peak), plus the 0.15 TECU TID.
-# Published quiet-day medium-scale structure at mid latitudes: MSTIDs of ~0.1-0.5 TECU (Hernandez-Pajares
-# et al. 2006); 0.2-0.8 TECU for the terminator-generated MSTIDs of quiet 2005 days over North America
-# (wavelength 300 +- 150 km); dominant peak-to-peak 0.08-1.5 TECU over North Africa on Kp <= 3 days
-# 2008-2016 (Oluwadare et al., Pure Appl. Geophys. 179, 2022) -- and in events of a few hours, not all
-# day.  What it gives on network-70km (measured, simulator truth, 15 deg mask): DD L1 ionosphere 1.2 ppm
-# RMS, 95 % 2.3-2.4 ppm, over the 70 km NORTH-SOUTH baseline; a linear (kriging) interpolation of the true
-# station residuals to the centre, 35 km from each station, misses the true DD by 0.6-0.8 cm RMS.  The SAPOS
-# ionospheric index I95 (95 % of the per-satellite ionospheric area-correction gradients, ppm on L1; a DD
-# holds two of them, so 2.3 ppm of DD is ~1.6 ppm each) reads this as undisturbed: "ideal values around 1 ppm, should not exceed 4" (SAPOS Baden-Wuerttemberg); 0-2
-# undisturbed, 2-4 slightly disturbed, 4-8 strongly (LGLN, SAPOS Niedersachsen).  Tang et al. (J. Navigation
-# 69, 2016) interpolate the DD ionosphere at mid latitudes to better than 1 cm.
-# moderate: the former quiet preset, kept so nothing measured on it is lost: irregularities 0.6 TECU
-# standard deviation (+-2 sigma = 2.4 TECU peak to peak, above the largest quiet-day MSTIDs above, and
-# everywhere all the time), DD 2.2-2.5 ppm RMS, 95 % 3.9-4.9 ppm on 70 km, kriging floor 1.3-1.6 cm at the
-# centre: the "slightly disturbed" I95 class, and the "moderate (up to 4 ppm)" days of the Norwegian CPOS
-# interpolation study (Ouassou et al., Int. J. Navig. Obs. 2015, 60-70 km spacing).
+# quiet: the medium-scale irregularity field is a standard deviation of 0.2 TECU (a sinusoid of ~0.28 TECU
+# amplitude; +-2 sigma = 0.8 TECU peak to peak), plus the 0.15 TECU TID. Published quiet-day medium-scale
+# structure at mid latitudes: MSTIDs of ~0.1-0.5 TECU (Hernandez-Pajares et al. 2006); 0.2-0.8 TECU for the
+# terminator-generated MSTIDs of quiet 2005 days over North America (wavelength 300 +- 150 km); dominant
+# peak-to-peak 0.08-1.5 TECU over North Africa on Kp <= 3 days 2008-2016 (Oluwadare et al., Pure Appl.
+# Geophys. 179, 2022). The SAPOS ionospheric index I95 (95 % of the per-satellite ionospheric
+# area-correction gradients, ppm on L1) reads its DD level as undisturbed: "ideal values around 1 ppm, should
+# not exceed 4" (SAPOS Baden-Wuerttemberg); 0-2 undisturbed, 2-4 slightly disturbed, 4-8 strongly (LGLN,
+# SAPOS Niedersachsen). stations/README.md has the DD levels each preset gives;
+# docs/decisions/0011-quiet-ionosphere-preset.md why quiet is this one.
+# moderate: irregularities 0.6 TECU standard deviation (+-2 sigma = 2.4 TECU peak to peak, above the largest
+# quiet-day MSTIDs above, and everywhere all the time): the "slightly disturbed" I95 class, and the
+# "moderate (up to 4 ppm)" days of the Norwegian CPOS interpolation study (Ouassou et al., Int. J. Navig.
+# Obs. 2015, 60-70 km spacing).
 IONOSPHERE_PRESETS: dict[str, dict[str, float]] = {
     "off": dict(vtec_tecu=0.0, gradient_tecu_per_1000km=0.0, irregularity_tecu=0.0,
                 irregularity_scale_km=300.0, tid_amplitude_tecu=0.0, tid_wavelength_km=300.0,

@@ -1,1 +1,1 @@
-"""augnet.centre (see ../shared/design/architecture.md)."""
+"""augnet.centre: the network engine (docs/architecture.md names each module's subject)."""

@@ -18,9 +18,8 @@ Models:
   distance models and their own grid method.
 - ``plane``: the linear interpolation model (LIM) of the seed paper -- a plane through the master in the
   east/north coordinate differences, least-squares fitted over the surrounding stations (Wanninger 1995;
-  Han and Rizos 1996). Kept for comparison: measured on ``network-70km`` against the simulator's truth
-  it is worse than ``kriging`` between the stations (0.79 against 0.68 cm RMS DD at the centre, quiet
-  ionosphere) and near any station but the master (0.45 against 0.19 cm at 5 km).
+  Han and Rizos 1996). Kept for comparison: against the simulator's truth it is worse than ``kriging``
+  between the stations and near any station but the master (docs/decisions/0002-kriging-over-plane.md).
 - ``along-line``: railway networks are long and thin, so the stations are nearly collinear and the plane is
   ill-conditioned across the line. The along-line model projects stations and rovers onto the line's
   principal axis and interpolates piecewise linearly between the two stations bracketing the rover (the end
@@ -30,18 +29,17 @@ Models:
 ``select_model`` detects the degenerate geometry from the singular values of the station coordinates,
 rather than assuming it from the network's name.
 
-Not done, and why (measured on ``network-70km`` against the simulator's truth): interpolating vertical
-(zenith) values at the ionospheric pierce points and mapping back changes nothing measurable here -- the
-mapping-function part of the DD ionosphere is linear across a 70 km network to 0.1 mm, and stations a few
-tens of km apart see a satellite along parallel rays, so the pierce points are the stations' pattern
-shifted. Smoothing the interpolated corrections in time makes them worse (30 s: +0.1 cm RMS) because the
-DD ionosphere itself moves by ~0.1 mm/s; the station residuals are already smoothed on each baseline.
-A nugget in the kriging (a surface that no longer passes through the station residuals, to filter their
-noise) makes the demo's trains worse: 0.35 -> 0.57 cm RMS at a nugget of 1 % of the sill on every station
-but the point's master (network-70km 0.69 -> 0.77 cm), 0.41 cm at 0.3 % growing with the square of the
-distance from the master (network-70km 0.69 cm; a 440 km line of eight stations 0.21 -> 0.18 cm). The smooth
-field between stations ~70 km apart is what the exact surface follows; the VRS takes each point's six
-nearest stations for it (`augnet.centre.vrs.SUBNET_STATIONS`).
+Not done, and why:
+- interpolating vertical (zenith) values at the ionospheric pierce points and mapping back: stations a few
+  tens of km apart see a satellite along parallel rays, so the pierce points are the stations' pattern
+  shifted and the mapping-function part is linear across the network
+  (docs/decisions/0005-no-pierce-point-or-time-smoothing.md);
+- smoothing the interpolated corrections in time: the DD ionosphere itself moves, and the station residuals
+  are already smoothed on each baseline (same decision);
+- a nugget in the kriging (a surface that no longer passes through the station residuals): the smooth field
+  between stations ~70 km apart is what the exact surface follows
+  (docs/decisions/0004-exact-kriging-no-nugget.md); the VRS takes each point's six nearest stations for it
+  (`augnet.centre.vrs.SUBNET_STATIONS`).
 """
 
 from __future__ import annotations
@@ -60,16 +58,12 @@ DISTANCE_WEIGHT_POWER = 2.0
 COINCIDENT_DISTANCE_M = 1e-3
 # Correlation length of the non-planar part of the residual field in the kriging model [m]: medium-scale
 # travelling disturbances have wavelengths of 100-500 km (Hernandez-Pajares et al., J. Geophys. Res. 111,
-# 2006; 300 +- 150 km for the terminator-generated ones over North America). The kriging weights depend
-# little on it (150 and 300 km give the same errors to 0.01 cm on network-70km): the drift carries the
-# trend, and the covariance only shapes the surface between stations. On the demo's six stations 100, 150, 300
-# and 500 km give 0.34, 0.31, 0.40 and 0.43 cm RMS at the trains (200 km: 0.35).
+# 2006; 300 +- 150 km for the terminator-generated ones over North America). The weights depend little on it:
+# the drift carries the trend (docs/decisions/0003-kriging-correlation-length.md).
 KRIGING_CORRELATION_LENGTH_M = 200e3
 # The along-line model assumes no gradient across the line. A rover farther than this from the line of the
 # stations it uses gets no correction from it: at 1-4 ppm of DD ionosphere (quiet day, network-rtk.md) the
-# unmodelled cross-line part is already 1-4 cm at 10 km. Measured: a satellite that only the master and one
-# neighbour have, interpolated to the centre of network-70km (25 km off their line), was off by 3 cm RMS on
-# a quiet day and 5 cm on a moderate one.
+# unmodelled cross-line part is already 1-4 cm at 10 km (docs/decisions/0006-along-line-cross-line-limit.md).
 MAX_CROSS_LINE_DISTANCE_M = 10e3
 
 

@@ -54,11 +54,9 @@ C = SPEED_OF_LIGHT_M_S
 # An epoch is processed when at least this many stations observed it: one baseline is the least a network
 # solution (and so anything beyond a single-base shift) needs.
 MIN_STATIONS_PER_EPOCH = 2
-# Network-corrected satellites a VRS epoch needs to be written as such. An RTK rover needs four double
-# differences to position, but across three systems five satellites give only two or three, and RTKLIB
-# then fixes on four satellites and is wrong by a metre (measured on network-70km's start-up); with eight,
-# once, RTKLIB's first fix (ratio 3.0 on 8 satellites at 0.5 Hz) was wrong by half a metre; with ten there
-# was no wrong fix. With fewer the epoch is a single-base VRS instead.
+# Network-corrected satellites a VRS epoch needs to be written as such; with fewer the epoch is a single-base
+# VRS instead. Across three systems a few satellites give a rover too few double differences per system to fix
+# reliably (docs/decisions/0007-vrs-min-corrected-satellites.md).
 MIN_CORRECTED_SATELLITES = 10
 # Time tags of different stations are the same epoch when they agree to this [s] (RINEX writes 0.1 us).
 EPOCH_MATCH_S = 1e-3

@@ -41,14 +41,9 @@ C = SPEED_OF_LIGHT_M_S
 # Within this distance of its master a point may use satellites the network has no corrections for: the
 # single-base DD ionosphere there is a few mm (quiet ionosphere, 1-4 ppm; network-rtk.md).
 UNCORRECTED_MAX_DISTANCE_M = 5_000.0
-# Stations used for a point's interpolation: its nearest ones ("the surrounding stations"). Six, not the four
-# around the point: universal kriging spends three stations on its plane, and on a railway the four nearest are
-# the two bracketing the point and two more, which leave the field's curvature along the line unknown; the next
-# stations along the line give it. Measured against the simulator's truth (scenario runs, quiet ionosphere,
-# interpolated DD ionosphere at the trains, RMS): demo 1.03 -> 0.35 cm (4 -> 6 stations; from the truth's own
-# station residuals 1.04 -> 0.29 cm), the demo with seed 1 0.50 -> 0.28 cm, a 440 km line of eight stations
-# and three off it 0.22 -> 0.21 cm (8: 0.21); the same line with two stations 28 km apart 0.33 cm either way
-# (exact kriging passes their residuals' noise on as a steep gradient); network-70km has four stations only.
+# Stations used for a point's interpolation: its nearest ones ("the surrounding stations"). Universal kriging
+# spends three stations on its plane, and on a railway the four nearest leave the field's curvature along the line
+# unknown; the next stations along the line give it (docs/decisions/0001-vrs-subnet-six-stations.md).
 SUBNET_STATIONS = 6
 TRANSIT_CARRY_ITERATIONS = 3  # each shrinks the transit-time error by v_sat/c ~ 1e-5
 

@@ -41,9 +41,8 @@ FIRMWARE = "1"
 
 def _capacity(have: int, need: int, least: int) -> int:
     """An array axis's new length: unchanged while it holds `need`, else doubled (amortised growth).
-    Each axis grows on its own: doubling the other one too (clients when a satellite-signal key is new,
-    keys when a client is) made the lock-state arrays 2,048 x 8,192 cells for 2,000 clients and ~80
-    keys, 512 MB, and the copies at each doubling stalled the centre for over a second."""
+    Each axis grows on its own: doubling the other one too multiplies the cells, and the copy at each
+    doubling stalls the centre (docs/decisions/0014-vrs-stream-arrays-grow-per-axis.md)."""
     return have if need <= have else max(need, 2 * have, least)
 
 

@@ -1,1 +1,1 @@
-"""augnet.console (see ../shared/design/architecture.md)."""
+"""augnet.console: the operator console (docs/architecture.md)."""

@@ -1,1 +1,1 @@
-"""augnet.onboard (see ../shared/design/architecture.md)."""
+"""augnet.onboard: the train's positioning core (docs/architecture.md names each module's subject)."""

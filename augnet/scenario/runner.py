@@ -70,9 +70,8 @@ GGA_INTERVAL_S = DEFAULT_GGA_INTERVAL_S  # the onboard NTRIP client's GGA upload
 CHECK_POINT_PREFIX = "check"
 TRUTH_EPOCHS_KEPT = 8  # network epochs are released within a few epochs of their tag (aligner wait 1 s)
 # How long the reference stations and the centre run before the trains' time 0 (scenarios with trains; see
-# the module docstring). On the demo a cold network has fixed its short baselines and about half the
-# satellites of its long ones by then; it reaches its steady ~80 % after ~10 minutes. So 300 s is the
-# conservative side of "a centre in service" (which runs for months) while keeping runs short.
+# the module docstring): trains meet a centre in service (which runs for months), runs stay short
+# (docs/decisions/0010-scenario-warm-up.md).
 DEFAULT_WARM_UP_S = 300.0
 
 

@@ -29,9 +29,8 @@ from augnet.gnss.rtcm.layouts import LAYOUTS, MSM_MAX_CELLS, Repeat, cell_fields
 from augnet.gnss.rtcm.observables import cell_presence, observables_to_fields, wavelengths
 
 # Receivers encoded per block. Each step streams (fields x receivers) arrays; in blocks of a few
-# hundred receivers a 12 x 2 MSM7's largest array (~260 x 512 x 8 B = 1 MB) stays in cache.
-# Measured (CPU ms for 1000 receivers, 12 x 2 MSM7, shared 2-core machine, best of 9):
-# one block 8.5-9.8, blocks of 128: 9.1-9.3, 256: 6.8-7.0, 512: 4.2-6.6.
+# hundred receivers a 12 x 2 MSM7's largest array (~260 x 512 x 8 B = 1 MB) stays in cache
+# (docs/decisions/0008-rtcm-batch-block-size.md).
 RECEIVERS_PER_BLOCK = 512
 
 

@@ -8,9 +8,8 @@ values, ``DF405_01`` ...), for comparison and display.
 Decoding is the hot path of the centre (every station, every epoch), so ``decode_msm`` reads the
 header with integer shifts and then all satellite and cell fields in one numpy gather: the bit
 offsets of every field depend only on (type, Nsat, Nsig, Ncell), and are cached per mask set
-(a station's masks repeat from epoch to epoch). Measured on a 12 x 2 MSM7 (192 body fields):
-reading the body with the numpy gather takes 7 us, with Python big-integer shifts 70 us; the whole
-``decode_msm`` takes ~20-30 us against pyrtcm's ~1,000 us. ``encode_msm`` is a plain bit writer,
+(a station's masks repeat from epoch to epoch): one gather instead of a big-integer shift per field
+(docs/decisions/0009-msm-decode-numpy-gather.md). ``encode_msm`` is a plain bit writer,
 independent of ``batch.py``'s vectorised packer for many receivers (tests compare the two).
 """
 
