@@ -1,4 +1,5 @@
-"""`augnet up`: the whole system in one asyncio process, wired in the order the data flows.
+"""`augnet up`: the whole system run by one asyncio process (the centre in a child process of its own),
+wired in the order the data flows.
 
     simulated stations --NTRIP sources--> caster :2101 --taps--> centre (its own process: centre_service.py)
     centre --VRS per train (stream factory)--> caster VRS mountpoint --NTRIP + GGA--> onboard trains
@@ -10,8 +11,9 @@
 behind its taps), bus, RBC link, live state and console, trains, then the stations that feed them all.
 `shutdown` stops the stations' feed first and the rest backwards, so nothing writes into a closed neighbour.
 
-This module only wires and routes; the parts' outputs are handled where their subject lives: what the
-operator sees in `live_state.py`, what the store keeps in `persistence.py`, the run report in `run_report.py`.
+This module only wires and routes; each subject lives in its own module: the run's configuration (scenario,
+caster mountpoints and users, store records) in `run_config.py`, what the operator sees in `live_state.py`,
+what the store keeps in `persistence.py`, the run report in `run_report.py`.
 """
 
 from __future__ import annotations
@@ -21,69 +23,35 @@ import contextlib
 import gc
 import json
 import logging
-import math
 import os
 import secrets
 import signal
 import time
 from pathlib import Path
 
-import numpy as np
-
 from augnet.centre.engine import SUBJECT_ALARMS, EpochReport
-from augnet.gnss import time as gtime
-from augnet.gnss.geometry import ecef_to_geodetic
 from augnet.onboard.trackmap import TrackDatabase
 from augnet.system import persistence
 from augnet.system.centre_service import CentreService, CentreSpec
 from augnet.system.live_state import LivePublisher, make_live_state
+from augnet.system.run_config import (STATION_USER, TRAIN_USER, VRS_MOUNT, caster_config, register_run,
+                                      scenario_for_run, station_along_km)
 from augnet.system.run_report import RunReport, run_report
-from augnet.system.settings import DEFAULT_LIVE_WINDOW_S, START_MARGIN_S, SystemSettings
+from augnet.system.settings import SystemSettings
 from augnet.system.trains import OnboardTrain
 from ntrip_caster.auth import hash_password
-from ntrip_caster.config import CasterConfig, MountConfig, User
 from ntrip_caster.server import Caster
 from stations.live import mountpoint_of, run_stations
-from stations.scenario import Scenario, Train, load_scenario
+from stations.scenario import Scenario
 from stations.trackmap_export import track_database
 from stations.world import World
 
 log = logging.getLogger(__name__)
 
-VRS_MOUNT = "VRS"
 ADMIN_NAME = "admin"
-STATION_GROUP, TRAIN_GROUP = "stations", "trains"
-STATION_USER, TRAIN_USER = "stations", "train"
-EXTRA_TRAIN_SPEEDS_KMH = (160.0, 200.0, 250.0, 300.0)
 LOCALHOST = "127.0.0.1"  # the in-process stations and trains reach the caster here
 HOUSEKEEPING_S = 5.0  # operator decisions stored by the console are re-read this often
 CONSOLE_START_POLLS, CONSOLE_START_POLL_S = 200, 0.05  # the console must listen within 10 s
-
-
-def scenario_for_run(settings: SystemSettings, now_gpst: float | None = None) -> Scenario:
-    """The scenario as this run plays it: starting a moment from now, for the run's window, with the
-    requested number of trains (the scenario's own first, then more spread along the line)."""
-    sc = load_scenario(settings.scenario)
-    now = gtime.now_gpst() if now_gpst is None else now_gpst
-    start = gtime.to_datetime(float(math.ceil(now + START_MARGIN_S))).replace(microsecond=0)
-    window = settings.duration_s + 10.0 if settings.duration_s else DEFAULT_LIVE_WINDOW_S
-    trains = list(sc.trains)
-    if settings.trains is not None:
-        trains = trains[:settings.trains]
-        line_km = None
-        if sc.line is not None:
-            from stations.track import TrackLine
-            line_km = TrackLine(sc.line).length_m / 1000.0
-        k = 0
-        while len(trains) < settings.trains and line_km:
-            k += 1
-            direction = 1 if k % 2 else -1
-            start_km = (k * 0.37 % 1.0) * (line_km - 20.0) + 10.0
-            speed = EXTRA_TRAIN_SPEEDS_KMH[k % len(EXTRA_TRAIN_SPEEDS_KMH)]
-            trains.append(Train(id=f"T{k:03d}", track=1 if direction > 0 else min(2, sc.line.tracks),
-                                start_km=round(start_km, 3), direction=direction, start_speed_kmh=speed,
-                                speed_kmh=speed))
-    return sc.model_copy(update={"start": start, "duration_s": int(math.ceil(window)), "trains": trains})
 
 
 class System:
@@ -407,54 +375,4 @@ class System:
                           if self.writer is not None else None))
 
 
-# --- the run's configuration (pure) ------------------------------------------------------------------------
-
-def station_along_km(world: World, stations) -> dict[str, float]:
-    """Each station's place along the line [km]: the nearest point of the track's centre line (none
-    without a line)."""
-    if world.track is None:
-        return {}
-    out = {}
-    for rx in stations:
-        llh = ecef_to_geodetic(rx.ecef[0])
-        en = world.track.geodetic_to_plane(np.degrees(llh[0]), np.degrees(llh[1]))
-        d = np.linalg.norm(world.track.centre_xy - en, axis=1)
-        out[rx.id] = float(world.track.s_m[int(np.argmin(d))] / 1000.0)
-    return out
-
-
-def register_run(db, stations, train_rx, hashes: dict[str, str]) -> dict[str, bool]:
-    """Store the run's configuration (in the store writer's session `db`); returns each station's enabled flag."""
-    enabled = {}
-    for rx in stations:
-        enabled[rx.id] = persistence.register_station(db, rx.id, rx.id, rx.ecef[0], rx.rtcm_id,
-                                                      mountpoint_of("station", rx.id))
-        persistence.register_mountpoint(db, rx.id, "source", TRAIN_GROUP, STATION_GROUP)
-    for rx in train_rx:
-        persistence.register_mountpoint(db, mountpoint_of("train", rx.id), "source", TRAIN_GROUP, STATION_GROUP)
-    persistence.register_mountpoint(db, VRS_MOUNT, "vrs", TRAIN_GROUP)
-    persistence.register_caster_user(db, STATION_USER, hashes[STATION_USER], STATION_GROUP)
-    persistence.register_caster_user(db, TRAIN_USER, hashes[TRAIN_USER], TRAIN_GROUP)
-    return enabled
-
-
-def caster_config(settings: SystemSettings, sc: Scenario, stations, train_rx, hashes: dict[str, str]) -> CasterConfig:
-    """The caster's mountpoints (a source per station and per train's raw stream, the VRS) and users."""
-    mounts = []
-    for rx in stations:
-        llh = np.degrees(ecef_to_geodetic(rx.ecef[0])[:2])
-        mounts.append(MountConfig(rx.id, "source", frozenset({TRAIN_GROUP}), frozenset({STATION_GROUP}),
-                                  {"identifier": rx.id, "latitude": round(float(llh[0]), 4),
-                                   "longitude": round(float(llh[1]), 4), "network": sc.name}))
-    for rx in train_rx:
-        mounts.append(MountConfig(mountpoint_of("train", rx.id), "source", frozenset({TRAIN_GROUP}),
-                                  frozenset({STATION_GROUP}), {"identifier": f"train {rx.id} raw"}))
-    mounts.append(MountConfig(VRS_MOUNT, "vrs", frozenset({TRAIN_GROUP}), frozenset(),
-                              {"identifier": f"{sc.name} VRS", "network": sc.name}))
-    users = {STATION_USER: User(STATION_USER, hashes[STATION_USER], frozenset({STATION_GROUP})),
-             TRAIN_USER: User(TRAIN_USER, hashes[TRAIN_USER], frozenset({TRAIN_GROUP}))}
-    return CasterConfig(host=settings.host, port=settings.caster_port, identifier="augnet", operator="augnet up",
-                        users=users, mounts=tuple(mounts))
-
-
-__all__ = ["System", "SystemSettings", "RunReport", "scenario_for_run", "SUBJECT_ALARMS"]
+__all__ = ["System", "SystemSettings", "RunReport", "SUBJECT_ALARMS"]
