@@ -11,6 +11,8 @@ import sys
 
 import typer
 
+from augnet.blas_threads import limit_blas_threads
+
 app = typer.Typer(help="augnet: track-side GNSS augmentation network.", no_args_is_help=True,
                   add_completion=False)
 
@@ -73,6 +75,7 @@ def run() -> None:
 
 
 def main() -> None:
+    limit_blas_threads()  # before the subcommands import numpy: BLAS reads its thread count when it loads
     _mount()
     app()
 

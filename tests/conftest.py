@@ -7,6 +7,11 @@ from pathlib import Path
 
 import pytest
 
+from augnet.blas_threads import limit_blas_threads
+
+# The suite runs the numerics as `augnet` does, with one BLAS thread: set before any test module imports numpy.
+limit_blas_threads()
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = REPO_ROOT.parent / "shared" / "data"
 

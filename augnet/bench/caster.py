@@ -55,4 +55,7 @@ def main(argv: list[str] | None = None) -> None:
 
 
 if __name__ == "__main__":
+    from augnet.blas_threads import limit_blas_threads
+
+    limit_blas_threads()  # one BLAS thread, as under `augnet bench caster`
     main()

@@ -49,8 +49,7 @@ def main(argv: list[str] | None = None) -> None:
            "--console-port", str(console_port), "--state", str(work / "state.json"),
            "--report", str(work / "report.json")]
     log = open(work / "up.log", "w")
-    proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT,
-                            env=dict(os.environ, OPENBLAS_NUM_THREADS="1"))
+    proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)  # `augnet up` sets its BLAS threads
     try:
         t0 = time.monotonic()
         while not (work / "state.json").exists():

@@ -1,1 +1,2 @@
-"""`augnet up`: the whole system in one process (see runtime.py)."""
+"""`augnet up`: the whole system from one command (see runtime.py); the centre runs in a process of its own
+(centre_service.py)."""

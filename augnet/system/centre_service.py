@@ -68,6 +68,7 @@ from typing import Callable
 
 import numpy as np
 
+from augnet.blas_threads import limit_blas_threads
 from augnet.gnss import time as gtime
 
 log = logging.getLogger(__name__)
@@ -298,8 +299,6 @@ class CentreService:
         for sock in (mine, theirs):  # room for a whole epoch of VRS in flight (capped by net.core.wmem_max)
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SOCKET_BUFFER_BYTES)
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, SOCKET_BUFFER_BYTES)
-        # small numpy matrices: one BLAS thread each (two would spin against the loop on two cores)
-        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
         proc = ctx.Process(target=_child_main, args=(theirs, self.spec), name="augnet-centre", daemon=True)
         proc.start()
         theirs.close()
@@ -482,6 +481,9 @@ class CentreService:
 
 
 def _child_main(sock: socket.socket, spec: CentreSpec) -> None:
+    # small numpy matrices: two BLAS threads would spin against the loop on two cores (the variables are
+    # inherited from `augnet`; without them the running pool is limited)
+    limit_blas_threads()
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C: the parent stops us
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     _CentreWorker(sock, spec).run()

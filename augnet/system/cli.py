@@ -10,6 +10,7 @@ from typing import Optional
 
 import typer
 
+from augnet.system.baseline_quality import FIXED_BASELINE_FRACTION
 from augnet.system.settings import (DEFAULT_CASTER_PORT, DEFAULT_CONSOLE_PORT, DEFAULT_DB_URL, SettingsError,
                                     SystemSettings)
 
@@ -98,10 +99,10 @@ async def _log_lines(system, every_s: float = 10.0) -> None:
     """Without a terminal: one status line every `every_s`."""
     while not system.stop_event.is_set():
         await asyncio.sleep(every_s)
-        r = system.last_report
+        r = system.publisher.last_report
         trains = " ".join(f"{tid}:{(t.last.solution.status_name if t.last else '-')}"
                           for tid, t in sorted(system.trains.items()))
         fixed = r.network.fixed_fraction() if r else {}
         print(f"[{system.settings.scenario}] epochs {system.centre.timings.epochs} stations "
               f"{len(r.network.present) if r else 0}/{len(system.centre.stations)} baselines fixed "
-              f"{sum(v >= 0.5 for v in fixed.values())}/{len(fixed)} trains {trains}", flush=True)
+              f"{sum(v >= FIXED_BASELINE_FRACTION for v in fixed.values())}/{len(fixed)} trains {trains}", flush=True)

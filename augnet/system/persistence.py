@@ -16,11 +16,13 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
 from augnet.store import queries
-from augnet.store.models import CasterUser, Mountpoint, Station, Train, TrainSession, utcnow
+from augnet.store.models import CasterUser, Mountpoint, Severity, Station, Train, TrainSession, utcnow
+from augnet.system.baseline_quality import quality_rows
 
 log = logging.getLogger(__name__)
 
 SYSTEM_ACTOR = "system"  # audit-log actor for what the running system itself records
+QUALITY_INTERVAL_S = 10.0  # one quality-history row per baseline this often
 
 
 class StoreWriter:
@@ -103,3 +105,50 @@ def station_enabled_map(s: Session) -> dict[str, bool]:
 def record_quality_batch(s: Session, at: dt.datetime, rows: list[tuple[str, float, float | None, int]]) -> None:
     for subject, fixed, rms, sats in rows:
         queries.record_quality(s, at, subject, fixed, rms, sats)
+
+
+# --- what the running network reports ------------------------------------------------------------------
+
+class AlarmRecorder:
+    """The centre's alarms into the store: an alarm (kind, subject) is raised once and stays open until the
+    centre clears it. `log` keeps every raise of the run, for the terminal view and the run report."""
+
+    def __init__(self, writer: StoreWriter):
+        self.writer = writer
+        self._open: set[tuple[str, str]] = set()
+        self.log: list[dict] = []
+
+    def record(self, kind: str, subject: str, severity: str, message: str, cleared: bool) -> bool:
+        """Store a raise or a clear; True when this call raised a new alarm."""
+        key = (kind, subject)
+        if cleared:
+            if key in self._open:
+                self._open.discard(key)
+                self.writer.submit(lambda db: queries.clear_alarm(db, kind, subject))
+            return False
+        if key in self._open:
+            return False
+        self._open.add(key)
+        self.log.append({"kind": kind, "subject": subject, "severity": severity, "message": message,
+                         "at_utc": dt.datetime.now(dt.timezone.utc).isoformat()})
+        sev = Severity(severity) if severity in {m.value for m in Severity} else Severity.WARNING
+        self.writer.submit(lambda db: queries.raise_alarm(db, kind, subject, sev, message))
+        return True
+
+
+class QualityHistory:
+    """The network's baselines into the quality history, one row each every `interval_s`."""
+
+    def __init__(self, writer: StoreWriter, interval_s: float = QUALITY_INTERVAL_S):
+        self.writer = writer
+        self.interval_s = interval_s
+        self._last_unix = 0.0
+
+    def on_epoch(self, network, now_unix: float) -> None:
+        """`network` is the epoch's `NetworkEpoch`; rows are written when `interval_s` has passed."""
+        if now_unix - self._last_unix < self.interval_s:
+            return
+        self._last_unix = now_unix
+        at = dt.datetime.now(dt.timezone.utc).replace(microsecond=0, tzinfo=None)
+        rows = quality_rows(network)
+        self.writer.submit(lambda db: record_quality_batch(db, at, rows))

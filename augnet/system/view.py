@@ -11,14 +11,19 @@ from rich.live import Live
 from rich.panel import Panel
 from rich.table import Table
 
+from augnet.system.baseline_quality import FIXED_BASELINE_FRACTION
+from augnet.system.live_state import CORRECTION_AGE_P99_EPOCHS
+
 REFRESH_S = 1.0
+ALARMS_SHOWN = 5  # the latest alarms raised
 FIX_STYLE = {"fix": "bold green", "float": "yellow", "single": "red", "none": "dim"}
 
 
 def render(system) -> Group:
-    r = system.last_report
+    r = system.publisher.last_report
     head = Table.grid(padding=(0, 2))
-    ages = np.array(system.correction_age_s[-300:]) if system.correction_age_s else np.array([])
+    recent = system.publisher.correction_age_s[-CORRECTION_AGE_P99_EPOCHS:]
+    ages = np.array(recent) if recent else np.array([])
     p99 = f"{np.percentile(ages, 99) * 1000:.0f} ms" if ages.size else "-"
     solve = system.centre.solve_ms_p99() if system.centre else None
     head.add_row(f"[b]augnet up[/b] {system.settings.scenario}",
@@ -44,7 +49,7 @@ def render(system) -> Group:
         bl.add_column(c)
     if r:
         for key, frac in sorted(r.network.fixed_fraction().items()):
-            style = "green" if frac >= 0.5 else "yellow" if frac > 0 else "red"
+            style = "green" if frac >= FIXED_BASELINE_FRACTION else "yellow" if frac > 0 else "red"
             bl.add_row(key, f"[{style}]{frac:.0%}[/{style}]")
 
     tr = Table(title="trains")
@@ -64,7 +69,7 @@ def render(system) -> Group:
     al = Table(title="alarms (latest)")
     for c in ("kind", "subject", "severity"):
         al.add_column(c)
-    for a in system.alarm_log[-5:]:
+    for a in (system.alarms.log if system.alarms is not None else [])[-ALARMS_SHOWN:]:
         al.add_row(a["kind"], a["subject"], a["severity"])
     rbc = system.rbc.snapshot() if system.rbc else None
     foot = (f"RSSP-I link {'up' if rbc['link_up'] else 'down'}, RBC sections {rbc['sections']}, "

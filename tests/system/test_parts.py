@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from augnet.system.rbc_link import SECTION_LENGTH_KM, SectionPlan, fixed_stations
-from augnet.system.runtime import scenario_for_run
+from augnet.system.run_config import scenario_for_run
 from augnet.system.settings import MAX_LIVE_TRAINS, SettingsError, SystemSettings
 from rssp1.messages import SectionStatus
 from stations.track import TrackLine

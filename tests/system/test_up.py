@@ -44,7 +44,7 @@ def up_run(tmp_path_factory):
            "--db", f"sqlite:///{work / 'augnet.db'}", "--caster-port", str(caster_port),
            "--console-port", str(console_port), "--state", str(work / "state.json"),
            "--report", str(work / "report.json")]
-    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", PYTHONUNBUFFERED="1")
+    env = dict(os.environ, PYTHONUNBUFFERED="1")  # `augnet up` sets its own BLAS threads
     log = open(work / "up.log", "w")
     t0 = time.monotonic()
     proc = subprocess.Popen(cmd, cwd=work, stdout=log, stderr=subprocess.STDOUT, env=env)

@@ -1,0 +1,103 @@
+"""The configuration of one `augnet up` run, computed before anything starts: the scenario as the run
+plays it, where the stations sit along the line, the caster's mountpoints and users, and what the store
+records of them. Pure functions (the store one runs in the store writer's session)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from augnet.gnss import time as gtime
+from augnet.gnss.geometry import ecef_to_geodetic
+from augnet.system import persistence
+from augnet.system.settings import DEFAULT_LIVE_WINDOW_S, START_MARGIN_S, SystemSettings
+from ntrip_caster.config import CasterConfig, MountConfig, User
+from stations.live import mountpoint_of
+from stations.scenario import Scenario, Train, load_scenario
+from stations.world import World
+
+VRS_MOUNT = "VRS"
+STATION_GROUP, TRAIN_GROUP = "stations", "trains"
+STATION_USER, TRAIN_USER = "stations", "train"
+RUN_END_MARGIN_S = 10.0  # with --duration, the simulated world runs this much longer than the run
+# Trains beyond the scenario's own: the k-th starts at fraction (k * EXTRA_TRAIN_STEP mod 1) of the line
+# between its end margins (a step that does not divide 1 spreads them without repeats), in alternating
+# directions, at these speeds in turn.
+EXTRA_TRAIN_STEP = 0.37
+LINE_END_MARGIN_KM = 10.0
+EXTRA_TRAIN_SPEEDS_KMH = (160.0, 200.0, 250.0, 300.0)
+
+
+def scenario_for_run(settings: SystemSettings, now_gpst: float | None = None) -> Scenario:
+    """The scenario as this run plays it: starting a moment from now, for the run's window, with the
+    requested number of trains (the scenario's own first, then more spread along the line)."""
+    sc = load_scenario(settings.scenario)
+    now = gtime.now_gpst() if now_gpst is None else now_gpst
+    start = gtime.to_datetime(float(math.ceil(now + START_MARGIN_S))).replace(microsecond=0)
+    window = settings.duration_s + RUN_END_MARGIN_S if settings.duration_s else DEFAULT_LIVE_WINDOW_S
+    trains = list(sc.trains)
+    if settings.trains is not None:
+        trains = trains[:settings.trains]
+        line_km = None
+        if sc.line is not None:
+            from stations.track import TrackLine
+            line_km = TrackLine(sc.line).length_m / 1000.0
+        k = 0
+        while len(trains) < settings.trains and line_km:
+            k += 1
+            direction = 1 if k % 2 else -1
+            start_km = (k * EXTRA_TRAIN_STEP % 1.0) * (line_km - 2 * LINE_END_MARGIN_KM) + LINE_END_MARGIN_KM
+            speed = EXTRA_TRAIN_SPEEDS_KMH[k % len(EXTRA_TRAIN_SPEEDS_KMH)]
+            trains.append(Train(id=f"T{k:03d}", track=1 if direction > 0 else min(2, sc.line.tracks),
+                                start_km=round(start_km, 3), direction=direction, start_speed_kmh=speed,
+                                speed_kmh=speed))
+    return sc.model_copy(update={"start": start, "duration_s": int(math.ceil(window)), "trains": trains})
+
+
+def station_along_km(world: World, stations) -> dict[str, float]:
+    """Each station's place along the line [km]: the nearest point of the track's centre line (none
+    without a line)."""
+    if world.track is None:
+        return {}
+    out = {}
+    for rx in stations:
+        llh = ecef_to_geodetic(rx.ecef[0])
+        en = world.track.geodetic_to_plane(np.degrees(llh[0]), np.degrees(llh[1]))
+        d = np.linalg.norm(world.track.centre_xy - en, axis=1)
+        out[rx.id] = float(world.track.s_m[int(np.argmin(d))] / 1000.0)
+    return out
+
+
+def register_run(db, stations, train_rx, hashes: dict[str, str]) -> dict[str, bool]:
+    """Store the run's configuration (in the store writer's session `db`); returns each station's enabled flag."""
+    enabled = {}
+    for rx in stations:
+        enabled[rx.id] = persistence.register_station(db, rx.id, rx.id, rx.ecef[0], rx.rtcm_id,
+                                                      mountpoint_of("station", rx.id))
+        persistence.register_mountpoint(db, rx.id, "source", TRAIN_GROUP, STATION_GROUP)
+    for rx in train_rx:
+        persistence.register_mountpoint(db, mountpoint_of("train", rx.id), "source", TRAIN_GROUP, STATION_GROUP)
+    persistence.register_mountpoint(db, VRS_MOUNT, "vrs", TRAIN_GROUP)
+    persistence.register_caster_user(db, STATION_USER, hashes[STATION_USER], STATION_GROUP)
+    persistence.register_caster_user(db, TRAIN_USER, hashes[TRAIN_USER], TRAIN_GROUP)
+    return enabled
+
+
+def caster_config(settings: SystemSettings, sc: Scenario, stations, train_rx, hashes: dict[str, str]) -> CasterConfig:
+    """The caster's mountpoints (a source per station and per train's raw stream, the VRS) and users."""
+    mounts = []
+    for rx in stations:
+        llh = np.degrees(ecef_to_geodetic(rx.ecef[0])[:2])
+        mounts.append(MountConfig(rx.id, "source", frozenset({TRAIN_GROUP}), frozenset({STATION_GROUP}),
+                                  {"identifier": rx.id, "latitude": round(float(llh[0]), 4),
+                                   "longitude": round(float(llh[1]), 4), "network": sc.name}))
+    for rx in train_rx:
+        mounts.append(MountConfig(mountpoint_of("train", rx.id), "source", frozenset({TRAIN_GROUP}),
+                                  frozenset({STATION_GROUP}), {"identifier": f"train {rx.id} raw"}))
+    mounts.append(MountConfig(VRS_MOUNT, "vrs", frozenset({TRAIN_GROUP}), frozenset(),
+                              {"identifier": f"{sc.name} VRS", "network": sc.name}))
+    users = {STATION_USER: User(STATION_USER, hashes[STATION_USER], frozenset({STATION_GROUP})),
+             TRAIN_USER: User(TRAIN_USER, hashes[TRAIN_USER], frozenset({TRAIN_GROUP}))}
+    return CasterConfig(host=settings.host, port=settings.caster_port, identifier="augnet", operator="augnet up",
+                        users=users, mounts=tuple(mounts))

@@ -1,0 +1,77 @@
+"""The run report (`augnet-run-report.json`) from a fixed set of counters: every key and value."""
+
+from __future__ import annotations
+
+import collections
+import json
+from types import SimpleNamespace as NS
+
+from augnet.system.run_report import run_report
+from augnet.system.trains import TrainStats
+
+STARTED_UNIX, ENDED_UNIX = 1_795_000_000.25, 1_795_000_240.31
+
+
+def _centre():
+    return NS(stations=["STA2", "STA1", "OFF1"], timings=NS(epochs=231), solve_ms_p99=lambda: 41.25,
+              latency_ms_p99=lambda: {"vrs_ready_ms_p99": 80.1, "vrs_sent_ms_p99": 95.3},
+              stages_ms=lambda: {"epochs": 200, "sessions": 2, "planned_ahead": 0.5,
+                                 "synthesis": {"p50": 1.0, "p90": 2.0, "p99": 3.0}},
+              errors=0, restarts=1)
+
+
+def _trains():
+    fixed = TrainStats(epochs=230, by_status=collections.Counter({"fix": 200, "float": 25, "single": 5}),
+                       first_fix_s=31.0, vrs_epochs=220, base_resets=1, base_moves=3,
+                       balises=[NS(balise_id="B1"), NS(balise_id="B2")], errors=0)
+    fixed.correction_latency_s.extend([0.1, 0.2, 0.3, 0.25, float("nan")])
+    return {"G101": NS(id="G101", stats=fixed, last=NS(solution=NS(status=1))),
+            "G303": NS(id="G303", stats=TrainStats(), last=None)}
+
+
+ALARMS = [{"kind": "station-down", "subject": "STA4", "severity": "warning", "message": "silent",
+           "at_utc": "2026-12-01T00:00:00+00:00"}]
+RBC = {"link_up": True, "rbc_fresh": True, "sections": 5, "rbc_alarms": 0}
+CASTER = {"port": 2101, "counters": {"requests": 10, "rejected": 1},
+          "mounts": {"VRS": {"bytes_in": 0, "bytes_out": 5000, "clients_total": 2, "kind": "vrs"},
+                     "STA1": {"bytes_in": 900, "bytes_out": 0, "clients_total": 0, "extra": 1}}}
+
+EXPECTED = {
+    "scenario": "demo", "started_utc": "2026-11-18T11:06:40.250000+00:00", "duration_s": 240.1,
+    "stations": ["OFF1", "STA1", "STA2"], "network_epochs": 231, "centre_solve_ms_p99": 41.25,
+    "centre_latency": {"vrs_ready_ms_p99": 80.1, "vrs_sent_ms_p99": 95.3},
+    "centre_stages_ms": {"epochs": 200, "sessions": 2, "planned_ahead": 0.5,
+                         "synthesis": {"p50": 1.0, "p90": 2.0, "p99": 3.0}},
+    "centre_errors": 0, "centre_restarts": 1,
+    "trains": {
+        "G101": {"epochs": 230, "status_counts": {"fix": 200, "float": 25, "single": 5}, "fix_rate": 0.8696,
+                 "time_to_first_fix_s": 31.0, "vrs_epochs": 220, "correction_latency_p50_s": 0.225,
+                 "correction_latency_p99_s": 0.298, "base_moves": 3, "base_resets": 1, "balises": ["B1", "B2"],
+                 "errors": 0, "holds_fix": True},
+        "G303": {"epochs": 0, "status_counts": {}, "fix_rate": 0.0, "time_to_first_fix_s": None, "vrs_epochs": 0,
+                 "correction_latency_p50_s": None, "correction_latency_p99_s": None, "base_moves": 0,
+                 "base_resets": 0, "balises": [], "errors": 0, "holds_fix": False},
+    },
+    "alarms": ALARMS, "rbc": RBC,
+    "caster": {"port": 2101, "counters": {"requests": 10, "rejected": 1},
+               "mounts": {"VRS": {"bytes_in": 0, "bytes_out": 5000, "clients_total": 2},
+                          "STA1": {"bytes_in": 900, "bytes_out": 0, "clients_total": 0}}},
+    "store": {"writes": 17, "failures": 0},
+}
+
+
+def test_the_report_of_a_run_lists_every_counter_under_its_key():
+    report = run_report("demo", STARTED_UNIX, ENDED_UNIX, centre=_centre(), trains=_trains(), alarms=ALARMS,
+                        rbc_snapshot=RBC, caster_snapshot=CASTER, store_counts={"writes": 17, "failures": 0})
+    text = report.to_json()
+    assert json.loads(text) == EXPECTED
+    assert list(json.loads(text)) == list(EXPECTED)  # the file's key order
+    assert list(json.loads(text)["trains"]["G101"]) == list(EXPECTED["trains"]["G101"])
+
+
+def test_a_run_that_never_started_its_parts_reports_empty_sections():
+    report = json.loads(run_report("demo", STARTED_UNIX, ENDED_UNIX).to_json())
+    assert report == {"scenario": "demo", "started_utc": "2026-11-18T11:06:40.250000+00:00", "duration_s": 240.1,
+                      "stations": [], "network_epochs": 0, "centre_solve_ms_p99": None, "centre_latency": {},
+                      "centre_stages_ms": {}, "centre_errors": 0, "centre_restarts": 0, "trains": {}, "alarms": [],
+                      "rbc": {}, "caster": {}, "store": {}}
