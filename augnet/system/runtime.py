@@ -36,7 +36,7 @@ from augnet.system import persistence
 from augnet.system.centre_service import CentreService, CentreSpec
 from augnet.system.settings import DEFAULT_LIVE_WINDOW_S, START_MARGIN_S, SystemSettings
 from augnet.system.trains import OnboardTrain
-from ntrip_caster.auth import hash_password
+from augwire.passwords import hash_password
 from ntrip_caster.config import CasterConfig, MountConfig, User
 from ntrip_caster.server import Caster
 from stations.live import mountpoint_of, run_stations

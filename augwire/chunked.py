@@ -1,0 +1,146 @@
+"""HTTP/1.1 chunked transfer coding (RFC 9112 section 7.1), as NTRIP 2.0 uses it both ways.
+
+Encoding: one chunk is built as one bytes object (size line, data, CRLF) so a writer sends it in one
+call: pygnssutils' dechunker drops data when a chunk's trailing CRLF arrives in a later read
+(ntrip.md). Decoding: `ChunkedDecoder`, sans-IO, for the caster's v2 sources (POST bodies) and for
+the clients reading a v2 caster's replies. A bare LF ends a line as well as CRLF (RFC 9112 section 2.2
+lets a recipient accept it); extensions are ignored; trailers are read and discarded.
+"""
+
+from __future__ import annotations
+
+from augwire.errors import NtripProtocolError
+
+LAST_CHUNK = b"0\r\n\r\n"
+# Largest chunk a peer may announce (the caster's default for v2 sources). RTCM 3 frames are at most
+# 1029 bytes; an epoch of a multi-constellation MSM7 station is 3-6 KB. 64 KiB leaves room for
+# batching and bounds what one chunk can carry.
+MAX_CHUNK_BYTES = 64 * 1024
+# Longest chunk-size line (hex size + extensions + CRLF), also the bound on a trailer line. h11 allows
+# chunk extensions without a separate bound; 1 KiB is far beyond anything legitimate ("400\r\n" is
+# typical).
+MAX_CHUNK_SIZE_LINE_BYTES = 1024
+_HEX_DIGITS = b"0123456789abcdefABCDEF"
+# A plain size line is at most 16 hex digits (a 64-bit size) + CRLF: how far the one-chunk fast path
+# looks for the line end.
+_PLAIN_SIZE_LINE_BYTES = 18
+
+
+def encode_chunk(data: bytes) -> bytes:
+    """One chunk carrying `data` (never empty: an empty chunk would end the stream)."""
+    if not data:
+        raise ValueError("an empty chunk terminates a chunked body; send LAST_CHUNK to end it")
+    return b"%X\r\n%b\r\n" % (len(data), data)
+
+
+def _is_hex(text: bytes) -> bool:
+    """True for a non-empty run of hex digits only (int(text, 16) alone would also take '0x', '_', '+')."""
+    return bool(text) and not text.strip(_HEX_DIGITS)
+
+
+class ChunkedDecoder:
+    """Feed it the bytes of a chunked body; it returns the data they carry.
+
+    Raises `NtripProtocolError(400)` on a malformed size line or missing CRLF, on a size line longer
+    than `max_size_line_bytes`, and on a chunk larger than `max_chunk_bytes` (None: no bound; the
+    decoder streams a chunk's data out as it comes, never holding a whole chunk). After the last
+    chunk (size 0) and its trailers, `finished` is True and further bytes are ignored.
+    """
+
+    __slots__ = ("_buf", "_remaining", "_state", "max_chunk_bytes", "max_size_line_bytes", "finished")
+
+    _SIZE, _DATA, _DATA_CRLF, _TRAILER = range(4)
+
+    def __init__(self, max_chunk_bytes: int | None = MAX_CHUNK_BYTES,
+                 max_size_line_bytes: int = MAX_CHUNK_SIZE_LINE_BYTES) -> None:
+        self._buf = bytearray()
+        self._remaining = 0
+        self._state = self._SIZE
+        self.max_chunk_bytes = max_chunk_bytes
+        self.max_size_line_bytes = max_size_line_bytes
+        self.finished = False
+
+    def feed(self, data: bytes) -> list[bytes]:
+        if self.finished:
+            return []
+        if self._state == self._SIZE and not self._buf:
+            whole = self._one_whole_chunk(data)
+            if whole is not None:
+                return [whole]
+        self._buf += data
+        out: list[bytes] = []
+        buf = self._buf
+        while buf:
+            if self._state == self._SIZE:
+                end = buf.find(b"\n")
+                if end < 0:
+                    if len(buf) > self.max_size_line_bytes:
+                        raise NtripProtocolError(400, "chunk size line too long")
+                    break
+                if end + 1 > self.max_size_line_bytes:
+                    raise NtripProtocolError(400, "chunk size line too long")
+                line = bytes(buf[:end]).rstrip(b"\r")
+                del buf[: end + 1]
+                size = self._chunk_size(line)
+                if size == 0:
+                    self._state = self._TRAILER
+                else:
+                    self._remaining = size
+                    self._state = self._DATA
+            elif self._state == self._DATA:
+                take = min(self._remaining, len(buf))
+                out.append(bytes(buf[:take]))
+                del buf[:take]
+                self._remaining -= take
+                if self._remaining == 0:
+                    self._state = self._DATA_CRLF
+            elif self._state == self._DATA_CRLF:
+                if buf[:1] == b"\n":
+                    del buf[:1]
+                    self._state = self._SIZE
+                elif buf[:2] == b"\r\n":
+                    del buf[:2]
+                    self._state = self._SIZE
+                elif len(buf) == 1 and buf[:1] == b"\r":
+                    break
+                else:
+                    raise NtripProtocolError(400, "chunk data not followed by CRLF")
+            else:  # trailer section: lines until an empty one
+                end = buf.find(b"\n")
+                if end < 0:
+                    if len(buf) > self.max_size_line_bytes:
+                        raise NtripProtocolError(400, "chunked trailer line too long")
+                    break
+                line = bytes(buf[:end]).rstrip(b"\r")
+                del buf[: end + 1]
+                if not line:
+                    self.finished = True
+                    buf.clear()
+                    break
+        return out
+
+    def _chunk_size(self, line: bytes) -> int:
+        """The size a chunk-size line announces (extensions after ';' ignored), checked against the bound."""
+        size_text = line.split(b";", 1)[0].strip()
+        if not _is_hex(size_text):
+            raise NtripProtocolError(400, f"bad chunk size line {line[:40]!r}")
+        size = int(size_text, 16)
+        if self.max_chunk_bytes is not None and size > self.max_chunk_bytes:
+            raise NtripProtocolError(400, f"chunk of {size} bytes exceeds {self.max_chunk_bytes}")
+        return size
+
+    def _one_whole_chunk(self, data: bytes) -> bytes | None:
+        """The data of `data` when it is exactly one whole non-empty chunk with a plain size line (how
+        casters write: one chunk per write), else None (the general path then decodes it)."""
+        end = data.find(b"\r\n", 0, _PLAIN_SIZE_LINE_BYTES)
+        if end <= 0 or end + 2 > self.max_size_line_bytes:
+            return None
+        size_text = data[:end]
+        if not _is_hex(size_text):
+            return None
+        size = int(size_text, 16)
+        if size == 0 or len(data) != end + size + 4 or data[-2:] != b"\r\n":
+            return None
+        if self.max_chunk_bytes is not None and size > self.max_chunk_bytes:
+            return None
+        return data[end + 2 : end + 2 + size]
