@@ -21,6 +21,9 @@ MAX_CHUNK_BYTES = 64 * 1024
 # typical).
 MAX_CHUNK_SIZE_LINE_BYTES = 1024
 _HEX_DIGITS = b"0123456789abcdefABCDEF"
+_CR, _LF = 0x0D, 0x0A
+# Decoder states: a size line, chunk data, the CRLF after the data, the trailer section.
+_SIZE, _DATA, _DATA_CRLF, _TRAILER = range(4)
 # A plain size line is at most 16 hex digits (a 64-bit size) + CRLF: how far the one-chunk fast path
 # looks for the line end.
 _PLAIN_SIZE_LINE_BYTES = 18
@@ -49,13 +52,11 @@ class ChunkedDecoder:
 
     __slots__ = ("_buf", "_remaining", "_state", "max_chunk_bytes", "max_size_line_bytes", "finished")
 
-    _SIZE, _DATA, _DATA_CRLF, _TRAILER = range(4)
-
     def __init__(self, max_chunk_bytes: int | None = MAX_CHUNK_BYTES,
                  max_size_line_bytes: int = MAX_CHUNK_SIZE_LINE_BYTES) -> None:
         self._buf = bytearray()
         self._remaining = 0
-        self._state = self._SIZE
+        self._state = _SIZE
         self.max_chunk_bytes = max_chunk_bytes
         self.max_size_line_bytes = max_size_line_bytes
         self.finished = False
@@ -63,60 +64,64 @@ class ChunkedDecoder:
     def feed(self, data: bytes) -> list[bytes]:
         if self.finished:
             return []
-        if self._state == self._SIZE and not self._buf:
+        if self._state == _SIZE and not self._buf:
             whole = self._one_whole_chunk(data)
             if whole is not None:
                 return [whole]
-        self._buf += data
-        out: list[bytes] = []
         buf = self._buf
-        while buf:
-            if self._state == self._SIZE:
-                end = buf.find(b"\n")
-                if end < 0:
-                    if len(buf) > self.max_size_line_bytes:
-                        raise NtripProtocolError(400, "chunk size line too long")
-                    break
-                if end + 1 > self.max_size_line_bytes:
-                    raise NtripProtocolError(400, "chunk size line too long")
-                line = bytes(buf[:end]).rstrip(b"\r")
-                del buf[: end + 1]
-                size = self._chunk_size(line)
-                if size == 0:
-                    self._state = self._TRAILER
-                else:
-                    self._remaining = size
-                    self._state = self._DATA
-            elif self._state == self._DATA:
-                take = min(self._remaining, len(buf))
-                out.append(bytes(buf[:take]))
-                del buf[:take]
-                self._remaining -= take
-                if self._remaining == 0:
-                    self._state = self._DATA_CRLF
-            elif self._state == self._DATA_CRLF:
-                if buf[:1] == b"\n":
-                    del buf[:1]
-                    self._state = self._SIZE
-                elif buf[:2] == b"\r\n":
-                    del buf[:2]
-                    self._state = self._SIZE
-                elif len(buf) == 1 and buf[:1] == b"\r":
-                    break
+        buf += data
+        out: list[bytes] = []
+        state, remaining = self._state, self._remaining
+        max_line = self.max_size_line_bytes
+        pos, n = 0, len(buf)
+        while pos < n:
+            if state == _DATA:
+                take = min(remaining, n - pos)
+                out.append(bytes(buf[pos : pos + take]))
+                pos += take
+                remaining -= take
+                if remaining == 0:
+                    state = _DATA_CRLF
+            elif state == _DATA_CRLF:
+                if buf[pos] == _LF:
+                    pos += 1
+                    state = _SIZE
+                elif buf[pos] == _CR and n - pos == 1:
+                    break  # the LF is still to come
+                elif buf[pos] == _CR and buf[pos + 1] == _LF:
+                    pos += 2
+                    state = _SIZE
                 else:
                     raise NtripProtocolError(400, "chunk data not followed by CRLF")
-            else:  # trailer section: lines until an empty one
-                end = buf.find(b"\n")
+            elif state == _SIZE:
+                end = buf.find(b"\n", pos)
                 if end < 0:
-                    if len(buf) > self.max_size_line_bytes:
+                    if n - pos > max_line:
+                        raise NtripProtocolError(400, "chunk size line too long")
+                    break
+                if end - pos + 1 > max_line:
+                    raise NtripProtocolError(400, "chunk size line too long")
+                size = self._chunk_size(bytes(buf[pos:end]).rstrip(b"\r"))
+                pos = end + 1
+                if size == 0:
+                    state = _TRAILER
+                else:
+                    remaining = size
+                    state = _DATA
+            else:  # trailer section: lines until an empty one
+                end = buf.find(b"\n", pos)
+                if end < 0:
+                    if n - pos > max_line:
                         raise NtripProtocolError(400, "chunked trailer line too long")
                     break
-                line = bytes(buf[:end]).rstrip(b"\r")
-                del buf[: end + 1]
-                if not line:
+                empty = not bytes(buf[pos:end]).rstrip(b"\r")
+                pos = end + 1
+                if empty:
                     self.finished = True
-                    buf.clear()
+                    pos = n
                     break
+        del buf[:pos]
+        self._state, self._remaining = state, remaining
         return out
 
     def _chunk_size(self, line: bytes) -> int:
