@@ -6,7 +6,7 @@ The server reads its defaults from here; a config file may override the ones mar
 
 from __future__ import annotations
 
-from augwire.chunked import MAX_CHUNK_BYTES, MAX_CHUNK_SIZE_LINE_BYTES  # noqa: F401 (re-exported)
+from augwire.chunked import MAX_CHUNK_BYTES
 
 # --- request head -----------------------------------------------------------------------------
 # Whole request head (request line + headers + blank line). Apache LimitRequestFieldSize 8190 per
