@@ -41,6 +41,15 @@ def _is_hex(text: bytes) -> bool:
     return bool(text) and not text.strip(_HEX_DIGITS)
 
 
+def _line_end(buf: bytearray, pos: int, max_line: int, what: str) -> int:
+    """Index of the LF ending the line that starts at `pos`, or -1 while it has not come; raises once
+    the unfinished line is longer than `max_line` bytes."""
+    end = buf.find(b"\n", pos)
+    if end < 0 and len(buf) - pos > max_line:
+        raise NtripProtocolError(400, f"{what} too long")
+    return end
+
+
 class ChunkedDecoder:
     """Feed it the bytes of a chunked body; it returns the data they carry.
 
@@ -94,10 +103,8 @@ class ChunkedDecoder:
                 else:
                     raise NtripProtocolError(400, "chunk data not followed by CRLF")
             elif state == _SIZE:
-                end = buf.find(b"\n", pos)
+                end = _line_end(buf, pos, max_line, "chunk size line")
                 if end < 0:
-                    if n - pos > max_line:
-                        raise NtripProtocolError(400, "chunk size line too long")
                     break
                 if end - pos + 1 > max_line:
                     raise NtripProtocolError(400, "chunk size line too long")
@@ -109,10 +116,8 @@ class ChunkedDecoder:
                     remaining = size
                     state = _DATA
             else:  # trailer section: lines until an empty one
-                end = buf.find(b"\n", pos)
+                end = _line_end(buf, pos, max_line, "chunked trailer line")
                 if end < 0:
-                    if n - pos > max_line:
-                        raise NtripProtocolError(400, "chunked trailer line too long")
                     break
                 empty = not bytes(buf[pos:end]).rstrip(b"\r")
                 pos = end + 1

@@ -4,14 +4,21 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from augnet.bench import rtcm as bench_rtcm
 from augnet.bench import wire as bench
 
 
-def test_bench_runs_and_reports_every_case(monkeypatch, capsys):
-    monkeypatch.setattr(bench_rtcm, "SECONDS_PER_REPEAT", 0.002)
-    monkeypatch.setattr(bench_rtcm, "REPEATS", 1)
-    monkeypatch.setattr(bench, "STREAM_FRAMES", 20)
+@pytest.fixture
+def tiny_repeats(monkeypatch):
+    """One short repeat per case and a 20-frame stream: the run proves the wiring, not the speed."""
+    for module, name, value in ((bench_rtcm, "SECONDS_PER_REPEAT", 0.002), (bench_rtcm, "REPEATS", 1),
+                                (bench, "STREAM_FRAMES", 20)):
+        monkeypatch.setattr(module, name, value)
+
+
+def test_bench_runs_and_reports_every_case(tiny_repeats, capsys):
     bench.main(["--json"])
     result = json.loads(capsys.readouterr().out)
     assert set(result["crc_calls_per_s"]) == {f"{n} B" for n in bench.CRC_LENGTHS}
