@@ -5,6 +5,7 @@ RUN apt-get update && apt-get install -y --no-install-recommends rtklib curl \
 WORKDIR /app
 COPY pyproject.toml README.md ./
 COPY augnet ./augnet
+COPY augwire ./augwire
 COPY stations ./stations
 COPY ntrip_caster ./ntrip_caster
 COPY rssp1 ./rssp1

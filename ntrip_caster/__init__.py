@@ -4,17 +4,18 @@ Protocol core (bytes in, events out; no sockets, no clock):
   request.py        parse one request head (client GET, v1 SOURCE, v2 POST) into NtripRequest
   connection.py     NtripServerConnection.receive_data(bytes) -> events (h11 style)
   response.py       every reply, per NTRIP version (ICY 200 OK, HTTP/1.1 + chunked, errors)
-  chunked.py        chunk encoding (one write per chunk) and a bounded chunked-body decoder
   sourcetable.py    STR / CAS / NET records, rendering, parsing, v2 filtering
   gga.py            GGA extraction, parsing and distances
-  rtcm_frames.py    RTCM 3 frame boundaries (preamble, length, CRC-24Q) for frame-aligned fan-out
   reposition.py     when a GGA moves a client's VRS point; nearest base with hysteresis
   limits.py         every limit and timeout, named once, with its precedent
-  errors.py         NtripProtocolError(status)
+
+From `augwire` (the wire package the caster shares with augnet, which it never imports): chunked
+transfer coding, RTCM 3 frame boundaries and the frame aligner for frame-aligned fan-out, CRC-24Q,
+scrypt password hashes, and NtripProtocolError(status), the one error the protocol core raises.
 
 Server:
   server.py         Caster: mountpoints, sessions, auth, limits, fan-out, taps, stats, shutdown
-  auth.py           users, groups, scrypt password hashes, verified-credential cache
+  auth.py           users, groups, verified-credential cache
   config.py         TOML / YAML configuration
   stream_factory.py the interface VRS mountpoints use (implemented by augnet.centre later)
   relay_factory.py  a factory relaying one source mountpoint per client (tests, load tests)

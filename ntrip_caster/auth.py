@@ -1,15 +1,11 @@
-"""Users, groups and per-mountpoint access; passwords stored as scrypt hashes (hashlib.scrypt).
-
-Hash format: `scrypt$<log2 N>$<r>$<p>$<salt b64>$<hash b64>`. Parameters N=2^14, r=8, p=1 are
-Percival's (scrypt paper, 2009) interactive-login choice and the example in Python's hashlib docs:
-~16 MiB and a few tens of ms per check. A caster sees the same credentials on every reconnect of a
+"""Users, groups and per-mountpoint access; passwords stored as scrypt hashes (`augwire.passwords`,
+a few tens of ms per check). A caster sees the same credentials on every reconnect of a
 train, so successful checks are remembered in a bounded cache keyed by an HMAC of the credentials
 under a per-process random key (no plaintext password is kept).
 """
 
 from __future__ import annotations
 
-import base64
 import hashlib
 import hmac
 import os
@@ -17,41 +13,12 @@ import threading
 from collections import OrderedDict
 from dataclasses import dataclass, field
 
-SCRYPT_LOG2_N = 14
-SCRYPT_R = 8
-SCRYPT_P = 1
-SCRYPT_SALT_BYTES = 16
-SCRYPT_HASH_BYTES = 32
-# hashlib's default maxmem is 32 MiB; scrypt needs 128 * r * N bytes plus overhead.
-SCRYPT_MAXMEM_BYTES = 64 * 1024 * 1024
+from augwire.passwords import SCRYPT_SALT_BYTES, hash_password, verify_password
+
 # Distinct verified credentials remembered (one per train or station is the realistic case).
 AUTH_CACHE_ENTRIES = 100_000
 # Groups value that opens a mountpoint to anyone, without credentials.
 PUBLIC = "*"
-
-
-def hash_password(password: str, *, log2_n: int = SCRYPT_LOG2_N, r: int = SCRYPT_R,
-                  p: int = SCRYPT_P, salt: bytes | None = None) -> str:
-    salt = os.urandom(SCRYPT_SALT_BYTES) if salt is None else salt
-    digest = hashlib.scrypt(password.encode("utf-8"), salt=salt, n=1 << log2_n, r=r, p=p,
-                            maxmem=SCRYPT_MAXMEM_BYTES, dklen=SCRYPT_HASH_BYTES)
-    b64 = base64.b64encode
-    return f"scrypt${log2_n}${r}${p}${b64(salt).decode()}${b64(digest).decode()}"
-
-
-def verify_password(password: str, stored: str) -> bool:
-    """True when `password` matches the stored scrypt hash; False for any malformed hash."""
-    try:
-        scheme, log2_n, r, p, salt, digest = stored.split("$")
-        if scheme != "scrypt":
-            return False
-        want = base64.b64decode(digest, validate=True)
-        got = hashlib.scrypt(password.encode("utf-8"), salt=base64.b64decode(salt, validate=True),
-                             n=1 << int(log2_n), r=int(r), p=int(p), maxmem=SCRYPT_MAXMEM_BYTES,
-                             dklen=len(want))
-    except (ValueError, TypeError):
-        return False
-    return hmac.compare_digest(got, want)
 
 
 @dataclass(slots=True)

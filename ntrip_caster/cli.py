@@ -13,7 +13,8 @@ from typing import Optional
 
 import typer
 
-from .auth import hash_password
+from augwire.passwords import hash_password
+
 from .config import CasterConfig, ConfigError, load_config
 
 app = typer.Typer(help="NTRIP 1.0 / 2.0 caster.", no_args_is_help=True, add_completion=False)

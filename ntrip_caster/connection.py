@@ -19,8 +19,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .chunked import ChunkedDecoder
-from .errors import NtripProtocolError
+from augwire.chunked import ChunkedDecoder
+from augwire.errors import NtripProtocolError
+
 from .gga import NmeaLineSplitter
 from .limits import MAX_REQUEST_HEAD_BYTES, MAX_SOURCE_CHUNK_BYTES
 from .request import NtripRequest, parse_request_head

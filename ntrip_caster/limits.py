@@ -6,6 +6,8 @@ The server reads its defaults from here; a config file may override the ones mar
 
 from __future__ import annotations
 
+from augwire.chunked import MAX_CHUNK_BYTES
+
 # --- request head -----------------------------------------------------------------------------
 # Whole request head (request line + headers + blank line). Apache LimitRequestFieldSize 8190 per
 # line, Tomcat maxHttpHeaderSize 8 KiB, nginx large_client_header_buffers 8 KiB; an NTRIP request is
@@ -22,12 +24,9 @@ REQUEST_HEAD_TIMEOUT_S = 10.0
 # A source silent this long is dropped so its mountpoint can be taken again (ntrip.md: 60 s is a
 # common default; BKG's caster and Millipede both use a minute). Configurable.
 SOURCE_IDLE_TIMEOUT_S = 60.0
-# Largest chunk a v2 source may announce. RTCM 3 frames are at most 1029 bytes; an epoch of a
-# multi-constellation MSM7 station is 3-6 KB. 64 KiB leaves room for batching, bounds memory.
-MAX_SOURCE_CHUNK_BYTES = 64 * 1024
-# Longest chunk-size line (hex size + extensions + CRLF). h11 allows chunk extensions without a
-# separate bound; 1 KiB is far beyond anything legitimate ("400\r\n" is typical).
-MAX_CHUNK_SIZE_LINE_BYTES = 1024
+# Largest chunk a v2 source may announce (64 KiB; configurable), and the longest chunk-size line
+# (1 KiB): the chunked decoder's bounds, named with their reasons in augwire/chunked.py.
+MAX_SOURCE_CHUNK_BYTES = MAX_CHUNK_BYTES
 
 # --- clients -----------------------------------------------------------------------------------
 # Bytes queued for one client beyond which the client is dropped: a slow client must never slow the

@@ -35,9 +35,12 @@ from typing import Any, Optional
 
 import typer
 
-from .chunked import encode_chunk
+from augwire.chunked import ChunkedDecoder, encode_chunk
+from augwire.crc24q import crc24q
+from augwire.rtcm_framing import (CRC_BYTES, FRAME_OVERHEAD_BYTES, HEADER_BYTES, MAX_PAYLOAD_BYTES,
+                                  PREAMBLE, frame, frame_length)
+
 from .gga import format_gga
-from .rtcm_frames import RTCM3_MAX_PAYLOAD_BYTES, crc24q, frame_rtcm3
 
 # RTCM 10403.3 reserves 4001-4095 for proprietary messages; 4088 is not assigned to a vendor in
 # RTKLIB's or pyrtcm's tables, so decoders skip it as unknown.
@@ -58,17 +61,17 @@ app = typer.Typer(help="NTRIP load generator.", no_args_is_help=True, add_comple
 
 def epoch_frame(seq: int, sent_ns: int, size: int) -> bytes:
     """The RTCM 3 frame for one epoch; `size` is the payload size (bytes)."""
-    size = max(LOADTEST_MIN_PAYLOAD, min(size, RTCM3_MAX_PAYLOAD_BYTES))
+    size = max(LOADTEST_MIN_PAYLOAD, min(size, MAX_PAYLOAD_BYTES))
     head = _HEAD.pack(LOADTEST_MESSAGE_TYPE << 4, seq, sent_ns)
     start = seq & 0xFF  # fill byte i is (seq + i) mod 256, sliced from a precomputed pattern
-    return frame_rtcm3(head + _FILL_PATTERN[start:start + size - len(head)])
+    return frame(head + _FILL_PATTERN[start:start + size - len(head)])
 
 
 _FILL_PATTERN = bytes(range(256)) * 6  # 1,536 bytes: any 256-aligned start leaves >= 1,023
 
 
 def epoch_payload(size: int) -> int:
-    return max(LOADTEST_MIN_PAYLOAD, min(size, RTCM3_MAX_PAYLOAD_BYTES))
+    return max(LOADTEST_MIN_PAYLOAD, min(size, MAX_PAYLOAD_BYTES))
 
 
 @dataclass
@@ -107,7 +110,7 @@ class FrameCheck:
     def check(self, seq: int, frame: bytes) -> bool:
         first = self.seen.get(seq)
         if first is None:
-            if crc24q(frame[:-3]) != int.from_bytes(frame[-3:], "big"):
+            if crc24q(frame[:-CRC_BYTES]) != int.from_bytes(frame[-CRC_BYTES:], "big"):
                 return False
             self.seen[seq] = frame
             return True
@@ -124,13 +127,11 @@ class LoadClient(asyncio.Protocol):
         self.transport: asyncio.Transport | None = None
         self.head_done = False
         self.buf = bytearray()
-        self.raw = bytearray()  # v2: chunked bytes not yet decoded
-        self.chunk_left = 0
+        self.dechunk: ChunkedDecoder | None = None  # v2 replies in chunked coding
         self.latency_ns: dict[int, int] = {}
         self.bad = 0
         self.status = ""
         self.closed = False
-        self.chunked = False
         self.junk = 0
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
@@ -160,7 +161,9 @@ class LoadClient(asyncio.Protocol):
                 self.status = self.buf[:self.buf.find(b"\r\n")].decode("latin-1")
                 ok = self.status.startswith("HTTP/1.1 200")
                 # Some casters (Millipede) answer v2 without chunked coding: follow the reply.
-                self.chunked = b"transfer-encoding: chunked" in bytes(self.buf[:end]).lower()
+                if b"transfer-encoding: chunked" in bytes(self.buf[:end]).lower():
+                    # Any chunk size: the load's frames come in chunks of whatever the caster chose.
+                    self.dechunk = ChunkedDecoder(max_chunk_bytes=None)
                 rest = bytes(self.buf[end + 4:])
             self.buf = bytearray()
             self.head_done = True
@@ -172,79 +175,37 @@ class LoadClient(asyncio.Protocol):
             if not rest:
                 return
             data = rest
-        if self.chunked:
-            if not self.raw and self.chunk_left == 0:
-                # Fast path: the caster writes each chunk whole, so a read is usually one chunk.
-                end = data.find(b"\r\n", 0, 12)
-                if end > 0:
-                    size = int(data[:end], 16)
-                    if size and len(data) == end + size + 4 and data.endswith(b"\r\n"):
-                        data = data[end + 2:end + 2 + size]
-                    else:
-                        data = self._dechunk(data)
-                else:
-                    data = self._dechunk(data)
-            else:
-                data = self._dechunk(data)
-        if not self.buf and len(data) >= 6 and data[0] == 0xD3 and \
-                len(data) == (((data[1] & 3) << 8) | data[2]) + 6:
+        if self.dechunk is not None:
+            data = b"".join(self.dechunk.feed(data))
+        if not self.buf and len(data) >= FRAME_OVERHEAD_BYTES and data[0] == PREAMBLE and \
+                len(data) == frame_length(data, 0):
             self._frame(data, now)  # fast path: exactly one frame
             return
         self.buf += data
         self._frames(now)
 
     def _frame(self, frame: bytes, now: int) -> None:
-        if len(frame) < 6 + _HEAD.size:
+        if len(frame) < FRAME_OVERHEAD_BYTES + _HEAD.size:
             self.bad += 1
             return
-        mtype, seq, sent = _HEAD.unpack_from(frame, 3)
+        mtype, seq, sent = _HEAD.unpack_from(frame, HEADER_BYTES)
         if mtype >> 4 != LOADTEST_MESSAGE_TYPE or not self.check.check(seq, frame):
             self.bad += 1
             return
         self.latency_ns[seq] = now - sent
 
-    def _dechunk(self, data: bytes) -> bytes:
-        raw = self.raw
-        raw += data
-        out = bytearray()
-        pos = 0
-        n = len(raw)
-        while pos < n:
-            if self.chunk_left < 0:  # the CRLF after a chunk's data still to skip
-                take = min(-self.chunk_left, n - pos)
-                pos += take
-                self.chunk_left += take
-                continue
-            if self.chunk_left > 0:
-                take = min(self.chunk_left, n - pos)
-                out += raw[pos:pos + take]
-                pos += take
-                self.chunk_left -= take
-                if self.chunk_left == 0:
-                    self.chunk_left = -2
-                continue
-            end = raw.find(b"\r\n", pos)
-            if end < 0:
-                break
-            self.chunk_left = int(raw[pos:end].split(b";")[0], 16)
-            pos = end + 2
-            if self.chunk_left == 0:  # last chunk: the caster ended the stream
-                break
-        del raw[:pos]
-        return bytes(out)
-
     def _frames(self, now: int) -> None:
         buf = self.buf
         pos = 0
         n = len(buf)
-        while n - pos >= 6:
-            if buf[pos] != 0xD3:  # bytes between frames (e.g. a caster's extra CRLF after ICY)
-                nxt = buf.find(b"\xd3", pos + 1)
+        while n - pos >= FRAME_OVERHEAD_BYTES:
+            if buf[pos] != PREAMBLE:  # bytes between frames (e.g. a caster's extra CRLF after ICY)
+                nxt = buf.find(PREAMBLE, pos + 1)
                 end = n if nxt < 0 else nxt
                 self.junk += end - pos
                 pos = end
                 continue
-            total = (((buf[pos + 1] & 3) << 8) | buf[pos + 2]) + 6
+            total = frame_length(buf, pos)
             if n - pos < total:
                 break
             self._frame(bytes(buf[pos:pos + total]), now)

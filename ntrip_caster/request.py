@@ -16,7 +16,8 @@ import re
 from dataclasses import dataclass, field
 from urllib.parse import unquote
 
-from .errors import NtripProtocolError
+from augwire.errors import NtripProtocolError
+
 from .gga import GgaFix, parse_gga
 from .limits import MAX_HEADER_FIELDS
 

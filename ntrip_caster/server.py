@@ -23,17 +23,18 @@ from collections import Counter
 from dataclasses import replace
 from typing import Any, Callable
 
+from augwire.chunked import LAST_CHUNK, encode_chunk
+from augwire.errors import NtripProtocolError
+from augwire.rtcm_framing import RtcmFrameAligner
+
 from .auth import PUBLIC, Authenticator
-from .chunked import LAST_CHUNK, encode_chunk
 from .config import CasterConfig, MountConfig
 from .connection import (GgaLine, NtripServerConnection, RequestReceived, SourceData,
                          SourceFinished)
-from .errors import NtripProtocolError
 from .gga import GgaFix, parse_gga
 from .reposition import RepositionPolicy, choose_base
 from .request import NtripRequest
 from .response import error_response, json_response, source_ok, sourcetable_response, stream_ok
-from .rtcm_frames import RtcmFrameAligner
 from .sourcetable import CasRecord, StrRecord, filter_records, render_sourcetable
 from .stream_factory import StreamFactory, StreamHandle, load_factory
 

@@ -25,6 +25,8 @@ import random
 from dataclasses import dataclass, field
 
 from augnet.gnss import time as gtime
+from augwire.chunked import LAST_CHUNK, encode_chunk
+from augwire.rtcm_framing import CRC_BYTES, FRAME_OVERHEAD_BYTES, HEADER_BYTES, PREAMBLE, frame_length, message_type
 from stations.rtcm_stream import RtcmStreams
 from stations.scenario import Scenario
 from stations.world import World
@@ -196,13 +198,13 @@ class SourceConnection:
                         raise ConnectionError("caster closed the connection")
                     break
                 data = get.result()
-                payload = f"{len(data):X}\r\n".encode() + data + b"\r\n" if self._chunked else data
+                payload = encode_chunk(data) if self._chunked else data
                 writer.write(payload)
                 await writer.drain()
                 self.stats.bytes_sent += len(data)
                 self.stats.epochs_sent += 1
             if self._chunked:
-                writer.write(b"0\r\n\r\n")
+                writer.write(LAST_CHUNK)
                 await writer.drain()
         finally:
             closed.cancel()
@@ -213,12 +215,11 @@ def non_observation_frames(blob: bytes) -> bytes:
     descriptors and ephemerides, which stay valid when the epoch itself is too old to send."""
     out = bytearray()
     pos, n = 0, len(blob)
-    while pos + 6 <= n and blob[pos] == 0xD3:
-        length = ((blob[pos + 1] & 0x03) << 8) | blob[pos + 2]
-        end = pos + 6 + length
+    while pos + FRAME_OVERHEAD_BYTES <= n and blob[pos] == PREAMBLE:
+        end = pos + frame_length(blob, pos)
         if end > n:
             break
-        msg_type = (blob[pos + 3] << 4) | (blob[pos + 4] >> 4) if length >= 2 else 0
+        msg_type = message_type(blob[pos + HEADER_BYTES : end - CRC_BYTES])
         if not MSM_FIRST_TYPE <= msg_type <= MSM_LAST_TYPE:
             out += blob[pos:end]
         pos = end

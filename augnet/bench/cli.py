@@ -10,6 +10,7 @@ import typer
 
 BENCHMARKS = {
     "rtcm": ("augnet.bench.rtcm", "RTCM 3 codec: decode/encode against pyrtcm, batch MSM7 encoder."),
+    "wire": ("augnet.bench.wire", "augwire: CRC-24Q against pyrtcm by length, RTCM framer, chunked decoder."),
     "sim": ("augnet.bench.sim", "Simulated world: epochs per second for `demo` against the 50x real-time goal."),
     "rssp1": ("augnet.bench.rssp1", "RSSP-I: frames encoded + verified per second."),
     "caster": ("augnet.bench.caster", "NTRIP caster under load (see also `augnet loadtest`)."),

@@ -68,7 +68,7 @@ def measure() -> dict:
         msm_to_observables,
         observables_to_msm,
     )
-    from augnet.gnss.rtcm.framing import crc24q
+    from augwire.crc24q import crc24q
 
     inputs = sample_inputs(BATCH_RECEIVERS)
     sat_ids, sig_ids, station_ids, epochs, pr, cp, dop, cnr, lock, half = inputs

@@ -46,10 +46,11 @@ def add_operator(name: str = typer.Argument(...),
                  password: str = typer.Option(None, "--password", help="prompted for when not given")) -> None:
     """Create an operator account (audited as done by `system`)."""
     from augnet.console.schemas import MIN_PASSWORD_CHARS
-    from augnet.console.security import SYSTEM_ACTOR, hash_password
+    from augnet.console.security import SYSTEM_ACTOR
     from augnet.store import open_store
     from augnet.store import queries as q
     from augnet.store.models import Role
+    from augwire.passwords import hash_password
 
     try:
         role_value = Role(role)

@@ -1,4 +1,5 @@
-"""Operator credentials: scrypt password hashes (the caster's format) and Bearer API tokens.
+"""Operator credentials: scrypt password hashes (`augwire.passwords`, the caster's format) and Bearer API
+tokens.
 
 Tokens are random (augnet.store.queries.TOKEN_BYTES); the store keeps only their SHA-256. A login token
 lives LOGIN_TOKEN_LIFETIME; the bootstrap admin token printed by `augnet up` does not expire (revoke it
@@ -17,15 +18,14 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from augnet.store import queries as q
 from augnet.store.models import Operator, Role
-from ntrip_caster.auth import hash_password, verify_password
+from augwire.passwords import hash_password, verify_password
 
 # A working shift plus margin: an operator logs in once per shift.
 LOGIN_TOKEN_LIFETIME = dt.timedelta(hours=12)
 BOOTSTRAP_PASSWORD_BYTES = 12  # 96 bits, printed once by `augnet up` / `augnet console serve`
 SYSTEM_ACTOR = "system"
 
-__all__ = ["hash_password", "verify_password", "authenticate", "ensure_admin", "Bootstrap",
-           "LOGIN_TOKEN_LIFETIME", "SYSTEM_ACTOR"]
+__all__ = ["authenticate", "ensure_admin", "Bootstrap", "LOGIN_TOKEN_LIFETIME", "SYSTEM_ACTOR"]
 
 
 @lru_cache(maxsize=1)

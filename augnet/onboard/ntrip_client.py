@@ -24,6 +24,9 @@ import random
 from dataclasses import dataclass, field
 from typing import Awaitable, Callable, Optional, Union
 
+from augwire.chunked import ChunkedDecoder
+from augwire.errors import NtripProtocolError
+
 USER_AGENT = "NTRIP augnet/0.1"
 # Limits on what a caster may send before its data (h11 uses similar bounds): a response header
 # block over 16 KiB or a chunk-size line over 64 bytes is not NTRIP.
@@ -84,9 +87,7 @@ class NtripClientConnection:
         self.gga = gga
         self._buf = bytearray()
         self._state = "header"  # header -> body (raw | chunked) -> done
-        self._chunked = False
-        self._chunk_left = 0
-        self._chunk_state = "size"
+        self._dechunk: ChunkedDecoder | None = None  # a v2 reply in chunked coding
         self._sourcetable = bytearray()
 
     def request(self) -> bytes:
@@ -121,12 +122,22 @@ class NtripClientConnection:
                 self._state = "done"
             return out
         if self._state == "body" and self._buf:
-            payload = self._dechunk() if self._chunked else bytes(self._buf)
-            if not self._chunked:
-                self._buf.clear()
+            payload = bytes(self._buf) if self._dechunk is None else self._dechunked()
+            self._buf.clear()
             if payload:
                 out.append(Data(payload))
         return out
+
+    def _dechunked(self) -> bytes:
+        """The data carried by the chunked bytes in the buffer; the body is done after the last chunk."""
+        assert self._dechunk is not None
+        try:
+            payload = b"".join(self._dechunk.feed(bytes(self._buf)))
+        except NtripProtocolError as exc:
+            raise NtripError(exc.reason) from None
+        if self._dechunk.finished:
+            self._state = "done"
+        return payload
 
     def _parse_header(self) -> Event | None:
         buf = bytes(self._buf)
@@ -175,49 +186,14 @@ class NtripClientConnection:
             if headers.get("content-type", "").lower().startswith("gnss/sourcetable"):
                 self._state = "sourcetable"
                 return None
-            self._chunked = "chunked" in headers.get("transfer-encoding", "").lower()
+            if "chunked" in headers.get("transfer-encoding", "").lower():
+                # Any chunk size: the client streams a chunk's data out as it comes.
+                self._dechunk = ChunkedDecoder(max_chunk_bytes=None, max_size_line_bytes=MAX_CHUNK_LINE_BYTES)
             self._state = "body"
             return Connected(2 if parts[0] == "HTTP/1.1" else 1, status)
         self._state = "done"
         retry_v1 = self.version == 2 and code in (400, 405, 426, 501, 505)
         return Rejected(code, status, retry_v1)
-
-    def _dechunk(self) -> bytes:
-        out = bytearray()
-        buf = self._buf
-        while buf:
-            if self._chunk_state == "size":
-                nl = buf.find(b"\r\n")
-                if nl < 0:
-                    if len(buf) > MAX_CHUNK_LINE_BYTES:
-                        raise NtripError("chunk size line too long")
-                    break
-                size_text = bytes(buf[:nl]).split(b";", 1)[0].strip()
-                try:
-                    self._chunk_left = int(size_text, 16)
-                except ValueError:
-                    raise NtripError(f"bad chunk size {size_text!r}") from None
-                del buf[: nl + 2]
-                if self._chunk_left == 0:
-                    self._state = "done"
-                    buf.clear()
-                    break
-                self._chunk_state = "data"
-            elif self._chunk_state == "data":
-                take = min(self._chunk_left, len(buf))
-                out += buf[:take]
-                del buf[:take]
-                self._chunk_left -= take
-                if self._chunk_left == 0:
-                    self._chunk_state = "crlf"
-            else:  # crlf after the chunk data
-                if len(buf) < 2:
-                    break
-                if buf[:2] != b"\r\n":
-                    raise NtripError("chunk not terminated by CRLF")
-                del buf[:2]
-                self._chunk_state = "size"
-        return bytes(out)
 
 
 @dataclass

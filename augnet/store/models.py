@@ -83,7 +83,7 @@ class CasterUser(Base):
     __tablename__ = "caster_users"
     id: Mapped[int] = mapped_column(primary_key=True)
     name: Mapped[str] = mapped_column(String(64), unique=True)
-    password_hash: Mapped[str] = mapped_column(String(256))  # scrypt$... (ntrip_caster.auth format)
+    password_hash: Mapped[str] = mapped_column(String(256))  # scrypt$... (augwire.passwords format)
     groups: Mapped[str] = mapped_column(String(256), default="")
     enabled: Mapped[bool] = mapped_column(Boolean, default=True)
 

@@ -39,7 +39,7 @@ from augnet.system.run_config import (STATION_USER, TRAIN_USER, VRS_MOUNT, caste
 from augnet.system.run_report import RunReport, run_report
 from augnet.system.settings import SystemSettings
 from augnet.system.trains import OnboardTrain
-from ntrip_caster.auth import hash_password
+from augwire.passwords import hash_password
 from ntrip_caster.server import Caster
 from stations.live import mountpoint_of, run_stations
 from stations.scenario import Scenario

@@ -13,10 +13,10 @@ from fastapi.testclient import TestClient
 
 from augnet.console.app import create_app
 from augnet.console.live import LiveState
-from augnet.console.security import hash_password
 from augnet.store import make_engine, open_store
 from augnet.store import queries as q
 from augnet.store.models import Base
+from augwire.passwords import hash_password
 
 from tests.console.helpers import FAST_HASH, PASSWORDS, ROLES
 

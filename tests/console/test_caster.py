@@ -8,9 +8,9 @@ import time
 
 import pytest
 
-from augnet.console.security import hash_password, verify_password
 from augnet.store import queries as q
 from augnet.store.models import CasterUser
+from augwire.passwords import hash_password, verify_password
 from ntrip_caster.auth import PUBLIC, User
 from ntrip_caster.config import CasterConfig, Limits, MountConfig
 from ntrip_caster.embedded import CasterThread

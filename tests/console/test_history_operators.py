@@ -6,8 +6,8 @@ import datetime as dt
 
 import pytest
 
-from augnet.console.security import verify_password
 from augnet.store import queries as q
+from augwire.passwords import verify_password
 
 from tests.console.helpers import error_fields
 

@@ -7,9 +7,10 @@ import socket
 import time
 from pathlib import Path
 
-from ntrip_caster.auth import PUBLIC, User, hash_password
+from augwire.passwords import hash_password
+from augwire.rtcm_framing import split_frames as split_rtcm3_frames
+from ntrip_caster.auth import PUBLIC, User
 from ntrip_caster.config import CasterConfig, Limits, MountConfig
-from ntrip_caster.rtcm_frames import split_rtcm3_frames
 
 # Cheap scrypt (N=2^10) for test users: the format and code path are the real ones.
 FAST = {"log2_n": 10}

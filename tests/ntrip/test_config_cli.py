@@ -13,7 +13,8 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from ntrip_caster.auth import Authenticator, User, hash_password, verify_password
+from augwire.passwords import hash_password, verify_password
+from ntrip_caster.auth import Authenticator, User
 from ntrip_caster.cli import app
 from ntrip_caster.config import ConfigError, load_config
 

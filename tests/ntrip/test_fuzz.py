@@ -9,11 +9,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from ntrip_caster.connection import NtripServerConnection, RequestReceived, SourceData
-from ntrip_caster.errors import NtripProtocolError
-from ntrip_caster.gga import format_gga, parse_gga
+from augwire.errors import NtripProtocolError
 from ntrip_caster.config import Limits
+from ntrip_caster.connection import NtripServerConnection, RequestReceived, SourceData
 from ntrip_caster.embedded import CasterThread
+from ntrip_caster.gga import format_gga, parse_gga
 from ntrip_caster.limits import MAX_REQUEST_HEAD_BYTES
 
 from .helpers import basic, connect, make_config, open_client, open_v1_source, read_all, read_until

@@ -6,9 +6,9 @@ from __future__ import annotations
 import pytest
 from typer.testing import CliRunner
 
+from augwire.rtcm_framing import split_frames as split_rtcm3_frames
 from ntrip_caster.loadtest import (LOADTEST_MESSAGE_TYPE, FrameCheck, LoadSettings, app, epoch_frame,
                                    run_load)
-from ntrip_caster.rtcm_frames import split_rtcm3_frames
 
 
 def test_epoch_frames_are_valid_rtcm():

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
+from augwire.rtcm_framing import frame as frame_rtcm3
 from ntrip_caster.embedded import CasterThread
-from ntrip_caster.rtcm_frames import frame_rtcm3
 
 from .helpers import (STATION_PW, TRAIN_PW, make_config, open_client, open_v1_source,
                       read_exactly, rtcm_sample, wait_for)

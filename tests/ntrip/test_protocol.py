@@ -9,16 +9,18 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pyrtcm import RTCMReader
 
-from ntrip_caster.chunked import ChunkedDecoder, encode_chunk
+from augwire.chunked import ChunkedDecoder, encode_chunk
+from augwire.crc24q import crc24q, crc24q_bytewise
+from augwire.errors import NtripProtocolError
+from augwire.rtcm_framing import RtcmFrameAligner
+from augwire.rtcm_framing import frame as frame_rtcm3
+from augwire.rtcm_framing import split_frames as split_rtcm3_frames
 from ntrip_caster.connection import (CLIENT, CLOSED, GgaLine, NtripServerConnection, RequestReceived,
                                      SourceData, SourceFinished)
-from ntrip_caster.errors import NtripProtocolError
 from ntrip_caster.gga import NmeaLineSplitter, format_gga, great_circle_m, parse_gga
 from ntrip_caster.limits import MAX_NMEA_LINE_BYTES, MAX_REQUEST_HEAD_BYTES
 from ntrip_caster.reposition import RepositionPolicy, choose_base
 from ntrip_caster.response import error_response, sourcetable_response, stream_ok
-from ntrip_caster.rtcm_frames import (RtcmFrameAligner, crc24q, crc24q_bytewise, frame_rtcm3,
-                                      split_rtcm3_frames)
 from ntrip_caster.sourcetable import StrRecord, parse_sourcetable, render_sourcetable
 
 from .helpers import basic

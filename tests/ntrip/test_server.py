@@ -9,11 +9,11 @@ from dataclasses import replace
 
 import pytest
 
-from ntrip_caster.chunked import encode_chunk
+from augwire.chunked import encode_chunk
+from augwire.rtcm_framing import frame as frame_rtcm3
 from ntrip_caster.config import Limits, MountConfig
 from ntrip_caster.embedded import CasterThread
 from ntrip_caster.gga import format_gga
-from ntrip_caster.rtcm_frames import frame_rtcm3
 from ntrip_caster.sourcetable import parse_sourcetable
 
 from .helpers import (STATION_PW, TRAIN_PW, basic, connect, dechunk, make_config, open_client,

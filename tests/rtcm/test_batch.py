@@ -8,7 +8,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from augnet.gnss.rtcm import EncodeError, Observables, encode_msm, encode_msm_batch, frame, observables_to_msm
-from augnet.gnss.rtcm.framing import crc24q, crc24q_bytewise, crc24q_rows
+from augwire.crc24q import crc24q, crc24q_bytewise, crc24q_rows
 
 from ._support import assert_same_fields, pyrtcm_fields
 from .test_observables import random_observables

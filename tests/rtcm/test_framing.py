@@ -8,11 +8,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from augnet.gnss.rtcm.framing import (
+from augwire.crc24q import crc24q
+from augwire.rtcm_framing import (
     MAX_PAYLOAD_BYTES,
     FramingError,
     RtcmStreamReader,
-    crc24q,
     frame,
     read_frames,
 )

@@ -19,9 +19,9 @@ from augnet.console.schemas import (
     MountpointOut,
     MountpointPatch,
 )
-from augnet.console.security import hash_password
 from augnet.store import queries as q
 from augnet.store.models import CasterUser, Mountpoint
+from augwire.passwords import hash_password
 
 router = APIRouter(prefix="/caster", tags=["caster"])
 log = logging.getLogger(__name__)

@@ -7,9 +7,9 @@ from sqlalchemy import func, select
 
 from augnet.console.deps import Admin, DB, Key, field_error
 from augnet.console.schemas import OperatorIn, OperatorOut, OperatorPatch
-from augnet.console.security import hash_password
 from augnet.store import queries as q
 from augnet.store.models import Operator, Role
+from augwire.passwords import hash_password
 
 router = APIRouter(prefix="/operators", tags=["operators"])
 

@@ -1,4 +1,5 @@
-"""RTCM 3 codec: framing (CRC-24Q), message layouts as data, encoders and decoders.
+"""RTCM 3 codec: message layouts as data, encoders and decoders; framing and CRC-24Q are augwire's
+(`augwire.rtcm_framing`, `augwire.crc24q`), re-exported here as part of the codec's one entry point.
 
 Which function to call:
 
@@ -52,7 +53,6 @@ from augnet.gnss.rtcm.codec import (
     text_fields,
 )
 from augnet.gnss.rtcm.errors import DecodeError, EncodeError
-from augnet.gnss.rtcm.framing import Frame, RtcmStreamReader, StreamStats, crc24q, frame, iter_frames, read_frames
 from augnet.gnss.rtcm.layouts import SUPPORTED_TYPES
 from augnet.gnss.rtcm.msm import MsmMessage, decode_msm, encode_msm, make_msm, msm_from_fields
 from augnet.gnss.rtcm.observables import (
@@ -66,6 +66,8 @@ from augnet.gnss.rtcm.observables import (
     observables_to_msm_list,
     phase_offset_cycles,
 )
+from augwire.crc24q import crc24q
+from augwire.rtcm_framing import Frame, RtcmStreamReader, StreamStats, frame, iter_frames, read_frames
 
 __all__ = [
     "DecodeError", "EncodeError", "EncodedBatch", "Frame", "Message", "MessageReader", "MsmMessage", "Observables",

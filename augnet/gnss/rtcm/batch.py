@@ -24,9 +24,10 @@ import numpy as np
 
 from augnet.gnss.rtcm.errors import EncodeError
 from augnet.gnss.rtcm.fields import FIELDS, Kind
-from augnet.gnss.rtcm.framing import FRAME_OVERHEAD_BYTES, PREAMBLE, crc24q_rows
 from augnet.gnss.rtcm.layouts import LAYOUTS, MSM_MAX_CELLS, Repeat, cell_fields, msm_type, sat_fields
 from augnet.gnss.rtcm.observables import cell_presence, observables_to_fields, wavelengths
+from augwire.crc24q import crc24q_rows
+from augwire.rtcm_framing import FRAME_OVERHEAD_BYTES, PREAMBLE
 
 # Receivers encoded per block. Each step streams (fields x receivers) arrays; in blocks of a few
 # hundred receivers a 12 x 2 MSM7's largest array (~260 x 512 x 8 B = 1 MB) stays in cache

@@ -12,9 +12,9 @@ from dataclasses import dataclass, field
 
 from augnet.gnss.rtcm.errors import DecodeError, EncodeError
 from augnet.gnss.rtcm.fields import FIELDS, decode_raw, encode_raw, from_value, to_value
-from augnet.gnss.rtcm.framing import Frame, RtcmStreamReader, frame, message_type
 from augnet.gnss.rtcm.layouts import LAYOUTS, Repeat, msm_kind
 from augnet.gnss.rtcm.msm import MsmMessage, decode_msm, encode_msm, msm_from_fields
+from augwire.rtcm_framing import Frame, RtcmStreamReader, frame, message_type
 
 
 @dataclass

@@ -21,7 +21,6 @@ import numpy as np
 
 from augnet.gnss.rtcm.errors import DecodeError, EncodeError
 from augnet.gnss.rtcm.fields import FIELDS, to_value
-from augnet.gnss.rtcm.framing import message_type
 from augnet.gnss.rtcm.layouts import (
     MSM_EPOCH_FIELDS,
     MSM_HEADER_TAIL,
@@ -31,6 +30,7 @@ from augnet.gnss.rtcm.layouts import (
     msm_type,
     sat_fields,
 )
+from augwire.rtcm_framing import message_type
 
 # MSM header fields (Table 3.5-78) and the MsmMessage attribute each one fills. The epoch field
 # is 30 bits for every system (one DF, or GLONASS's DF416 + DF034; see layouts.MSM_EPOCH_FIELDS).

@@ -1,4 +1,4 @@
-"""The one exception the protocol core raises: it carries the status to answer with (h11 style)."""
+"""The one exception the NTRIP wire cores raise: it carries the HTTP status to answer with (h11 style)."""
 
 from __future__ import annotations
 
