@@ -66,6 +66,7 @@ from augnet.onboard.double_difference import (
     slipped_keys,
     zero_differences,
 )
+from augnet.onboard.motion import predict_pva
 from augnet.onboard.observations import EpochObs
 from augnet.onboard.spp import (
     SELECTION_CACHE_S,
@@ -74,7 +75,6 @@ from augnet.onboard.spp import (
     SppResult,
     doppler_velocity,
     first_code,
-    receiver_frame,
     satellite_positions,
     solve_spp,
 )
@@ -482,7 +482,7 @@ class RtkFilter:
             if self._restart_position(spp, restart):
                 return
         if self.n_kin == 9:
-            self._predict_pva(dt)
+            predict_pva(self.x, self.P, dt, self.opt.accel_sigma_h, self.opt.accel_sigma_v)
 
     def _random_walk(self, dt: float) -> None:
         """The ambiguities' and ionospheres' random walk over dt [s]."""
@@ -516,32 +516,6 @@ class RtkFilter:
             self.P[6:9, 6:9] = np.eye(3) * INIT_ACCELERATION_SIGMA_M_S2**2
         self.initialised = True
         return True
-
-    def _predict_pva(self, dt: float) -> None:
-        """Position-velocity-acceleration prediction over dt [s] with white jerk."""
-        F = np.eye(9)
-        F[0:3, 3:6] = np.eye(3) * dt
-        F[0:3, 6:9] = np.eye(3) * 0.5 * dt * dt
-        F[3:6, 6:9] = np.eye(3) * dt
-        self.x[:9] = F @ self.x[:9]
-        Pk = self.P[:9, :9]
-        Pka = self.P[:9, 9:]
-        self.P[:9, :9] = F @ Pk @ F.T
-        self.P[:9, 9:] = F @ Pka
-        self.P[9:, :9] = self.P[:9, 9:].T
-        # white-jerk noise on acceleration, in local ENU then rotated to ECEF
-        _, R = receiver_frame(self.x[:3])
-        q = R.T @ np.diag([self.opt.accel_sigma_h**2, self.opt.accel_sigma_h**2, self.opt.accel_sigma_v**2]) @ R
-        # continuous white jerk integrated over dt: the exact discrete Q of the PVA model
-        self.P[6:9, 6:9] += q * dt
-        self.P[3:6, 3:6] += q * dt**3 / 3.0
-        self.P[0:3, 0:3] += q * dt**5 / 20.0
-        self.P[3:6, 6:9] += q * dt**2 / 2.0
-        self.P[6:9, 3:6] += q * dt**2 / 2.0
-        self.P[0:3, 6:9] += q * dt**3 / 6.0
-        self.P[6:9, 0:3] += q * dt**3 / 6.0
-        self.P[0:3, 3:6] += q * dt**4 / 8.0
-        self.P[3:6, 0:3] += q * dt**4 / 8.0
 
     # -----------------------------------------------------------------------------------------
     # measurement update
