@@ -534,9 +534,7 @@ class RtkFilter:
         # within centimetres of where this update lands, so one linearisation serves
         x_rov = self._predicted_position(t)
         sd = self._single_differences(ep, x_rov)
-        ok_sat = ep.valid & (sd.el >= opt.elevation_mask_rad) & np.isfinite(ep.zd_base.el)
-        ok = ok_sat[:, None] & np.isfinite(sd.phase) & np.isfinite(sd.code) & ep.same_wl & np.isfinite(ep.wl)
-        var_sd = (self._phase_variance(sd.el) + self._phase_variance(ep.zd_base.el))[:, None] * np.ones((1, ep.nf))
+        ok, var_sd = self._usable(ep, sd)
         sigma0 = self._switch_ionosphere(baseline_m)
         self._add_states(ep, ok, sd.el, sigma0)
         groups = choose_groups(opt.systems, ep.sys_, ok, sd.el, ep.nf, self._amb_variances(ep.sats, ok))
@@ -545,13 +543,7 @@ class RtkFilter:
             return self._single(t, spp, "too few common satellites above the mask", age)
         dd = self._dd_index(groups, ep.sats)
         dd, rows, keep = self._screened_rows(ep, dd, groups, sd, x_rov, var_sd)
-        # With established ambiguities the phases alone place the rover to millimetres: linearise there
-        # (a 3-unknown least squares) rather than after a first full update from the SPP prior.
-        x_phase = self._phase_position(rows, x_rov)
-        if x_phase is not None and np.linalg.norm(x_phase - x_rov) > RELINEARISE_M:
-            x_rov = x_phase
-            sd = self._single_differences(ep, x_rov)
-            rows = self._rows(ep, dd, sd, var_sd, keep).about(self.x[:3], x_rov)
+        x_rov, sd, rows = self._at_phase_position(ep, dd, rows, sd, x_rov, var_sd, keep)
         x_rov, sd = self._iterated_update(ep, dd, rows, sd, x_rov, var_sd, keep)
         self._mark_observed(groups, ep.sats, t)
         sol = self._float_solution(t, n_sat_used, age)
@@ -621,6 +613,14 @@ class RtkFilter:
         for sat, seen in list(self.ion_seen.items()):
             if not t - seen <= ionosphere_prior.MAX_IONO_OUTAGE_S:
                 self._drop_ion(sat)
+
+    def _usable(self, ep: _CommonEpoch, sd: SingleDifferences) -> tuple[np.ndarray, np.ndarray]:
+        """Which SD observations (satellite, slot) enter the model: satellite states valid at both ends,
+        above the mask, finite phase and code on the same wavelength; and their SD phase variances [m^2]."""
+        ok_sat = ep.valid & (sd.el >= self.opt.elevation_mask_rad) & np.isfinite(ep.zd_base.el)
+        ok = ok_sat[:, None] & np.isfinite(sd.phase) & np.isfinite(sd.code) & ep.same_wl & np.isfinite(ep.wl)
+        var_sd = (self._phase_variance(sd.el) + self._phase_variance(ep.zd_base.el))[:, None] * np.ones((1, ep.nf))
+        return ok, var_sd
 
     def _single_differences(self, ep: _CommonEpoch, x_rov: np.ndarray) -> SingleDifferences:
         """The epoch's SDs with the rover model evaluated at x_rov."""
@@ -698,6 +698,17 @@ class RtkFilter:
             rows = self._rows(ep, dd, sd, var_sd, None).about(self.x[:3], x_rov)
         keep = ~((rows.kind == 0) & (np.abs(rows.v) > MAX_CODE_INNOVATION_M))
         return dd, rows.select(keep), keep
+
+    def _at_phase_position(self, ep: _CommonEpoch, dd: DDIndex, rows: Rows, sd: SingleDifferences,
+                           x_rov: np.ndarray, var_sd: np.ndarray, keep: np.ndarray):
+        """With established ambiguities the phases alone place the rover to millimetres: the rows
+        linearised there (a 3-unknown least squares) when that is over RELINEARISE_M from x_rov, rather
+        than after a first full update from the SPP prior.  Returns (x_rov, SDs, rows), changed or not."""
+        x_phase = self._phase_position(rows, x_rov)
+        if x_phase is None or not np.linalg.norm(x_phase - x_rov) > RELINEARISE_M:
+            return x_rov, sd, rows
+        sd = self._single_differences(ep, x_phase)
+        return x_phase, sd, self._rows(ep, dd, sd, var_sd, keep).about(self.x[:3], x_phase)
 
     def _iterated_update(self, ep: _CommonEpoch, dd: DDIndex, rows: Rows, sd: SingleDifferences,
                          x_rov: np.ndarray, var_sd: np.ndarray, keep: np.ndarray):
