@@ -3,7 +3,7 @@
 A case returns {"epochs": [record, ...], "meta": {...}}; a record is a flat dict of JSON values (the epoch's
 time under "t"). Bytes are pinned as sha256 (first 16 hex digits) and length; integers and strings exactly;
 metre values as integers of 0.1 mm (`tenth_mm`), compared within `compare.TOLERANCE_TENTH_MM`.
-Nothing here reads a clock: every input is a seeded simulation or a recorded file.
+No input depends on a clock: each is a seeded simulation or a recorded file, fed epoch by epoch.
 """
 
 from __future__ import annotations
@@ -22,15 +22,17 @@ from tests.golden import probes
 # minute, test_network_sim.py), and VRS sessions at these offsets from the check receiver [m, ECEF].
 CENTRE_SIM_S = 150
 VRS_OFFSETS_M = {"at-check1": (15.0, -20.0, 5.0), "east-9km": (5000.0, 7000.0, -3000.0),
-                 "near-west": (-20000.0, 9000.0, -8000.0)}
+                 "west-23km": (-20000.0, 9000.0, -8000.0)}
 ONBOARD_VRS_SESSION = "at-check1"
 # epochs of it also run through the centre process (spawn, protocol, the caster side's sinks)
 CENTRE_PROCESS_EPOCHS = 20
 # RTCM encoder case: the station streams of the first seconds of the same run
 RTCM_EPOCHS = 30
-# Real networks through `augnet vrs`'s reading: catnet's first two hours at 30 s, nl-network's 19 epochs
+# Real networks through `augnet vrs`: catnet's first two hours at 30 s, nl-network's 19 epochs
 CATNET_EPOCHS = 240
 CATNET_STATIONS = ("CREU", "EBRE", "GARR")
+CATNET_VRS_AT = "41.39,2.11,100"  # Barcelona, by UPC1 (inside the network's reach, 20 km from GARR)
+NL_VRS_AT = "52.0,4.5,50"  # as test_postprocess.py
 # GARR -> UPC1 (20 km): UPC1 at 1 Hz against GARR's 30 s epochs, so corrections up to 30 s old are used
 UPC1_EPOCHS = 300
 UPC1_MAX_AGE_S = 31.0
@@ -210,33 +212,46 @@ def centre_network_sim(shared: Path | None) -> dict:
     return {"epochs": run["network"], "meta": {"scenario": "network-70km", "seconds": CENTRE_SIM_S}}
 
 
-def _network_folder_run(stations, times, epoch, nav, n: int) -> list[dict]:
-    net = probes.network_solver(stations)
-    out = []
-    for e in range(min(n, len(times))):
-        ne = net.update(epoch(e), nav)
-        out.append(_network_record(ne, net))
-    return out
+def _augnet_vrs_case(folder: Path, at: str, epochs: int | None) -> tuple[list[dict], dict]:
+    """`augnet vrs` on a folder: per processed epoch the network record, and the VRS epoch it wrote (none
+    when the epoch was skipped); meta: the RINEX header it writes."""
+    network = []
+    result, header = probes.augnet_vrs(folder, at, lambda ne, solver: network.append(_network_record(ne, solver)),
+                                       epochs)
+    by_t = {}
+    for ep, mode, n in zip(result.epochs, result.epoch_mode, result.corrected_sats):
+        by_t[round(float(ep.t_gpst), 3)] = _vrs_epoch_record(ep, mode, n)
+    for rec in network:
+        rec["vrs"] = by_t.pop(round(rec["t"], 3), None)
+    if by_t:
+        raise AssertionError(f"VRS epochs at times the network did not solve: {sorted(by_t)[:3]}")
+    return network, {"rinex_header": header, "vrs_masters": dict(sorted(result.vrs_masters.items())),
+                     "skipped_epochs": int(result.skipped_epochs)}
+
+
+def _vrs_epoch_record(ep, mode: str, corrected: int) -> dict:
+    lam = 299792458.0 / np.asarray(ep.freq_hz, float)
+    return {"mode": mode, "corrected": int(corrected), "sats": [str(s) for s in ep.sats],
+            "codes": [[str(c) for c in row] for row in ep.codes], "lli": np.asarray(ep.lli).astype(int).tolist(),
+            "vrs_code": tenth_mm_rows(ep.code_m), "vrs_phase": tenth_mm_rows(np.asarray(ep.phase_cyc) * lam)}
 
 
 def centre_network_catnet(shared: Path | None) -> dict:
-    """catnet-2010-077's CREU, EBRE, GARR (130-290 km, GPS L1/L2, 30 s) read as `augnet vrs` reads a
-    folder, the network solved epoch by epoch from the day's start."""
+    """`augnet vrs` on catnet-2010-077's CREU, EBRE, GARR (130-290 km, GPS L1/L2, 30 s) from the day's start,
+    the VRS at CATNET_VRS_AT: the network (fixed tables, DD corrections) and the VRS epoch by epoch."""
     src = shared / "rinex" / "catnet-2010-077"
     with tempfile.TemporaryDirectory() as tmp:
         for name in [f"{s}0770.10o.gz" for s in CATNET_STATIONS] + ["brdc0770.10n.gz"]:
             os.symlink(src / name, Path(tmp) / name)
-        stations, times, epoch, nav = probes.load_network_folder(Path(tmp))
-        epochs = _network_folder_run(stations, times, epoch, nav, CATNET_EPOCHS)
+        epochs, meta = _augnet_vrs_case(Path(tmp), CATNET_VRS_AT, CATNET_EPOCHS)
     return {"epochs": epochs, "meta": {"folder": "rinex/catnet-2010-077", "stations": list(CATNET_STATIONS),
-                                       "epochs": CATNET_EPOCHS}}
+                                       "epochs": CATNET_EPOCHS, "at": CATNET_VRS_AT, **meta}}
 
 
 def centre_network_nl(shared: Path | None) -> dict:
-    """nl-network-2021's four Dutch stations (35-150 km) as `augnet vrs` reads them."""
-    stations, times, epoch, nav = probes.load_network_folder(shared / "rinex" / "nl-network-2021")
-    return {"epochs": _network_folder_run(stations, times, epoch, nav, len(times)),
-            "meta": {"folder": "rinex/nl-network-2021"}}
+    """`augnet vrs` on nl-network-2021's four Dutch stations (35-150 km), the VRS at NL_VRS_AT."""
+    epochs, meta = _augnet_vrs_case(shared / "rinex" / "nl-network-2021", NL_VRS_AT, None)
+    return {"epochs": epochs, "meta": {"folder": "rinex/nl-network-2021", "at": NL_VRS_AT, **meta}}
 
 
 def _solution_records(sols) -> list[dict]:

@@ -2,8 +2,13 @@
 the centre process, pinned epoch by epoch (tests/golden/data, written by `python -m tests.golden.record`).
 
 A failure names the first epoch and item that differ. Bytes and integers must be equal; positions may
-move by 0.5 mm and DD corrections by 0.1 mm (float sums in another order). When a difference is
-intended, say why in the commit and rewrite the case's file with `python -m tests.golden.record CASE`.
+move by 0.5 mm and DD corrections and VRS observations by 0.1 mm (float sums in another order). Code that
+moves or renames an API the cases call updates `probes.py`, never the data. When a difference is intended,
+say why in the commit and rewrite that case's file with `python -m tests.golden.record CASE`.
+
+    PYTHONPATH=$PWD python -m pytest -q tests/golden                 # every case
+    PYTHONPATH=$PWD python -m pytest -q tests/golden -m "not slow"   # without the simulated centre run
+    PYTHONPATH=$PWD python -m pytest -q tests/golden -k onboard_static
 """
 
 from __future__ import annotations
