@@ -28,6 +28,8 @@ ONBOARD_VRS_SESSION = "at-check1"
 CENTRE_PROCESS_EPOCHS = 20
 # RTCM encoder case: the station streams of the first seconds of the same run
 RTCM_EPOCHS = 30
+# seeded float ambiguity problems for the integer search and partial fixing
+AMBIGUITY_PROBLEMS = 200
 # Real networks through `augnet vrs`: catnet's first two hours at 30 s, nl-network's 19 epochs
 CATNET_EPOCHS = 240
 CATNET_STATIONS = ("CREU", "EBRE", "GARR")
@@ -196,6 +198,53 @@ def wire(shared: Path | None) -> dict:
     return {"epochs": epochs, "meta": {}}
 
 
+def _ambiguity_problem(rng, n: int, sigma_cyc: float, bias_cyc: float):
+    """Float DD ambiguities over two frequencies' worth of correlated geometry: (a_hat, Q, true integers)."""
+    G = rng.normal(size=(n, 3))
+    Q = sigma_cyc**2 * (np.eye(n) + np.ones((n, n))) + 50.0 * sigma_cyc**2 * G @ G.T / n
+    a = rng.integers(-50, 51, n).astype(float)
+    a_hat = a + np.linalg.cholesky(Q) @ rng.normal(size=n) + bias_cyc * rng.normal(size=n)
+    return a_hat, Q, a
+
+
+def _sig6(x: float) -> str:
+    return f"{float(x):.6g}"
+
+
+def _conditioned_mcyc(a_hat, Q, fix) -> list[int] | None:
+    """The float ambiguities conditioned on a partial fix's constraints Zs^T a = z [milli-cycles]: the same for
+    any integer basis of the fixed combinations."""
+    if fix is None:
+        return None
+    Zs = np.asarray(fix.Zs, float)
+    K = Q @ Zs @ np.linalg.inv(Zs.T @ Q @ Zs)
+    a = a_hat - K @ (Zs.T @ a_hat - np.asarray(fix.z_fixed, float))
+    return [int(round(v * 1e3)) for v in a]
+
+
+def ambiguity(shared: Path | None) -> dict:
+    """Integer least squares and each partial-fixing policy on seeded float ambiguity problems (well and badly
+    determined, biased and not): best two integer vectors, ratio, success rate, and what each partial fix
+    fixes (count, and the float solution conditioned on it, in milli-cycles)."""
+    rng = np.random.default_rng(18)
+    epochs = []
+    for k in range(AMBIGUITY_PROBLEMS):
+        n = int(rng.integers(4, 25))
+        sigma = float(rng.choice([0.01, 0.05, 0.15, 0.4]))
+        bias = float(rng.choice([0.0, 0.0, 0.1, 0.3]))
+        a_hat, Q, truth = _ambiguity_problem(rng, n, sigma, bias)
+        cands, ratio, rate = probes.lambda_best_two(a_hat, Q)
+        rec = {"t": k, "n": n, "best": np.asarray(cands).astype(int).tolist(), "ratio": _sig6(ratio),
+               "success_rate": _sig6(rate)}
+        for name, fix in probes.partial_fixes(a_hat, Q).items():
+            rec[f"{name}.count"] = None if fix is None else int(fix.count)
+            rec[f"{name}.ratio"] = None if fix is None else _sig6(fix.ratio)
+            rec[f"{name}.success_rate"] = None if fix is None else _sig6(fix.success_rate)
+            rec[f"{name}.a_fixed_mcyc"] = _conditioned_mcyc(a_hat, Q, fix)
+        epochs.append(rec)
+    return {"epochs": epochs, "meta": {"problems": AMBIGUITY_PROBLEMS, "seed": 18}}
+
+
 def vrs_streams(shared: Path | None) -> dict:
     """The centre engine's VRS bytes per epoch and session over the simulated run (the engine's own decoding
     of the station bytes, network solve, synthesis and encoding)."""
@@ -341,6 +390,7 @@ GOLDEN_SOURCE = {"centre_process": ("vrs_streams", CENTRE_PROCESS_EPOCHS)}
 CASES: dict[str, tuple[Callable[[Path | None], dict], bool, bool]] = {
     "rtcm_encoder": (rtcm_encoder, False, False),
     "wire": (wire, False, False),
+    "ambiguity": (ambiguity, False, False),
     "vrs_streams": (vrs_streams, False, True),
     "centre_network_sim": (centre_network_sim, False, True),
     "onboard_sim_vrs": (onboard_sim_vrs, False, True),

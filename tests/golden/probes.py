@@ -355,3 +355,27 @@ async def centre_service_run(stations: dict, t0: float, fixes: dict, feed: list)
     finally:
         await svc.stop()
     return out
+
+
+# --- integer ambiguity resolution --------------------------------------------------------------------
+
+
+def lambda_best_two(a_hat, Q):
+    """(best two integer vectors, ratio, bootstrapped success rate) of integer least squares."""
+    from augnet.gnss.ambiguity import lambda_search
+
+    res = lambda_search(a_hat, Q, 2)
+    return res.candidates, res.ratio, res.success_rate
+
+
+def partial_fixes(a_hat, Q) -> dict:
+    """The partial fix as the centre's baseline filter and the onboard RTK each call it with their default
+    settings: name -> PartialFix or None (Zs, z_fixed, ratio, success_rate). When one policy serves both,
+    call it here with each estimator's settings."""
+    from augnet.centre.baseline import BaselineConfig
+    from augnet.gnss.ambiguity import partial_fix
+    from augnet.onboard.rtk import RtkOptions, bounded_partial_fix
+
+    c, o = BaselineConfig(), RtkOptions()
+    return {"centre": partial_fix(a_hat, Q, c.fix_min_success_rate, c.fix_ratio, c.fix_min_count),
+            "onboard": bounded_partial_fix(a_hat, Q, o.min_success_rate, o.ratio_threshold, o.min_fix_ambiguities)}
