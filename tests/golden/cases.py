@@ -383,6 +383,19 @@ def centre_process(shared: Path | None) -> dict:
                                        "sessions_offset_from_check1_m": VRS_OFFSETS_M}}
 
 
+def run(case: str, shared: Path | None) -> dict:
+    """A case's outputs as its golden file holds them (through JSON: tuples become lists, keys strings),
+    computed with one BLAS thread (what `make test` and the services use: the float sums in one order)."""
+    import json
+
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        result = CASES[case][0](shared)
+    return json.loads(json.dumps({"meta": result["meta"], "epochs": result["epochs"]}, sort_keys=True,
+                                 allow_nan=False))
+
+
 # Cases without a golden file of their own: compared with the first epochs of another case's.
 GOLDEN_SOURCE = {"centre_process": ("vrs_streams", CENTRE_PROCESS_EPOCHS)}
 

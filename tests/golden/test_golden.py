@@ -13,12 +13,10 @@ say why in the commit and rewrite that case's file with `python -m tests.golden.
 
 from __future__ import annotations
 
-import json
-
 import pytest
 
 from tests.conftest import SHARED_DATA
-from tests.golden.cases import CASES, GOLDEN_SOURCE
+from tests.golden.cases import CASES, GOLDEN_SOURCE, run
 from tests.golden.compare import first_difference, load, path_of
 
 
@@ -40,12 +38,10 @@ def _golden(case: str) -> dict:
 
 @pytest.mark.parametrize("case", list(_params()))
 def test_golden(case):
-    fn, needs_shared, _ = CASES[case]
+    _, needs_shared, _ = CASES[case]
     if needs_shared and not SHARED_DATA.is_dir():
         pytest.skip(f"real recordings not available: {SHARED_DATA} is absent")
     recorded = _golden(case)
-    now = fn(SHARED_DATA if needs_shared else None)
-    # through JSON as the golden file went (tuples become lists, keys strings)
-    now = json.loads(json.dumps({"meta": now["meta"], "epochs": now["epochs"]}, sort_keys=True))
+    now = run(case, SHARED_DATA if needs_shared else None)
     diff = first_difference(case, recorded, now)
     assert diff is None, diff
