@@ -24,6 +24,10 @@ CENTRE_SIM_S = 150
 VRS_OFFSETS_M = {"at-check1": (15.0, -20.0, 5.0), "east-9km": (5000.0, 7000.0, -3000.0),
                  "west-23km": (-20000.0, 9000.0, -8000.0)}
 ONBOARD_VRS_SESSION = "at-check1"
+# epoch -> session changes on the way: (what, session, new offset from check1 [m, ECEF])
+SESSION_EVENTS = {60: (("move", "east-9km", (7000.0, 4000.0, -2000.0)),),
+                  90: (("open", "north-15km", (-3000.0, -6000.0, 13000.0)),),
+                  120: (("close", "west-23km", None),)}
 # epochs of it also run through the centre process (spawn, protocol, the caster side's sinks)
 CENTRE_PROCESS_EPOCHS = 20
 # RTCM encoder case: the station streams of the first seconds of the same run
@@ -72,23 +76,39 @@ def _sim(duration_s: int = CENTRE_SIM_S):
 
 
 def _centre_run():
-    """The centre engine fed the simulated stations epoch by epoch with VRS sessions open: per epoch, the
-    VRS bytes of each session and the network's state. Computed once per process (two cases read it)."""
+    """The centre engine fed the simulated stations epoch by epoch with VRS sessions open (one moved, one
+    opened and one closed on the way, SESSION_EVENTS): per epoch, each session's VRS bytes (MSM7, as served,
+    and MSM4 from a second encoder given the same VRS epochs), the bus messages and the network's state.
+    Computed once per process (three cases read it)."""
     if "centre" in _SIM_CACHE:
         return _SIM_CACHE["centre"]
     world, streams, stations = _sim()
     engine = probes.centre_engine(stations, world.t0)
+    msm4 = probes.vrs_encoder(4)
     check = world.receivers[world.receiver_ids.index("check1")].ecef[0]
     got: dict[str, bytearray] = {}
-    points = {}
-    for name, off in VRS_OFFSETS_M.items():
+
+    def open_session(name: str, offset_m) -> None:
         got[name] = bytearray()
-        points[name] = check + np.array(off)
-        lat, lon, h = probes.geodetic_deg(points[name])
+        lat, lon, h = probes.geodetic_deg(check + np.array(offset_m))
         engine.open_session(name, lat, lon, h, got[name].extend)
+        msm4.add(name, engine.sessions[name].station_id, engine.sessions[name].point_ecef)
+
+    for name, off in VRS_OFFSETS_M.items():
+        open_session(name, off)
     epochs, vrs_bytes, outbox = [], [], []
     now = 0.0
     for e in range(CENTRE_SIM_S):
+        for kind, name, off in SESSION_EVENTS.get(e, ()):
+            if kind == "open":
+                open_session(name, off)
+            elif kind == "move":
+                engine.move_session(name, *probes.geodetic_deg(check + np.array(off)))
+                msm4.move(name, engine.sessions[name].point_ecef)
+            else:
+                engine.close_session(name)
+                msm4.remove(name)
+                del got[name]
         for name in stations:
             engine.feed(name, streams.epoch_bytes[name][e][1], now)
         now += 1.0
@@ -98,13 +118,21 @@ def _centre_run():
         vrs = {name: bytes(buf) for name, buf in got.items()}
         for buf in got.values():
             buf.clear()
+        if reports[0].vrs is not None:
+            for name, data in msm4.encode(list(engine.sessions), reports[0].vrs, engine.nav).items():
+                vrs[f"{name}.msm4"] = data
         vrs_bytes.append(vrs)
         outbox.append(_outbox_item(engine.drain_outbox()))
         epochs.append(_network_record(reports[0].network, engine.network))
     out = {"world": world, "streams": streams, "stations": stations, "network": epochs, "vrs": vrs_bytes,
-           "points": points, "outbox": outbox}
+           "outbox": outbox}
     _SIM_CACHE["centre"] = out
     return out
+
+
+def _centre_run_meta() -> dict:
+    return {"scenario": "network-70km", "seconds": CENTRE_SIM_S, "sessions_offset_from_check1_m": VRS_OFFSETS_M,
+            "session_events": SESSION_EVENTS}
 
 
 def _outbox_item(messages) -> list:
@@ -251,8 +279,7 @@ def vrs_streams(shared: Path | None) -> dict:
     run = _centre_run()
     epochs = [{"t": ne["t"], "bus": bus, **{name: _bytes_item(data) for name, data in vrs.items()}}
               for ne, vrs, bus in zip(run["network"], run["vrs"], run["outbox"])]
-    return {"epochs": epochs, "meta": {"scenario": "network-70km", "seconds": CENTRE_SIM_S,
-                                       "sessions_offset_from_check1_m": VRS_OFFSETS_M}}
+    return {"epochs": epochs, "meta": _centre_run_meta()}
 
 
 def centre_network_sim(shared: Path | None) -> dict:
@@ -379,8 +406,9 @@ def centre_process(shared: Path | None) -> dict:
     got = asyncio.run(probes.centre_service_run(stations, world.t0, fixes, feed))
     epochs = [{"t": t, "bus": _outbox_item(bus), **{name: _bytes_item(vrs[name]) for name in VRS_OFFSETS_M}}
               for t, vrs, bus in got]
-    return {"epochs": epochs, "meta": {"scenario": "network-70km", "seconds": CENTRE_SIM_S,
-                                       "sessions_offset_from_check1_m": VRS_OFFSETS_M}}
+    if any(e < CENTRE_PROCESS_EPOCHS for e in SESSION_EVENTS):
+        raise AssertionError("the centre process case covers the epochs before the first session event only")
+    return {"epochs": epochs, "meta": _centre_run_meta()}
 
 
 def run(case: str, shared: Path | None) -> dict:
@@ -397,7 +425,8 @@ def run(case: str, shared: Path | None) -> dict:
 
 
 # Cases without a golden file of their own: compared with the first epochs of another case's.
-GOLDEN_SOURCE = {"centre_process": ("vrs_streams", CENTRE_PROCESS_EPOCHS)}
+# (golden case, its first epochs, the items compared)
+GOLDEN_SOURCE = {"centre_process": ("vrs_streams", CENTRE_PROCESS_EPOCHS, ("t", "bus", *VRS_OFFSETS_M))}
 
 # name -> (function, needs ../shared/data, slow (> ~20 s alone))
 CASES: dict[str, tuple[Callable[[Path | None], dict], bool, bool]] = {

@@ -135,6 +135,12 @@ def centre_engine(stations: dict, t0: float, name: str = "golden"):
     return CentreEngine(stations, t0, network_name=name)
 
 
+def vrs_encoder(msm_level: int):
+    from augnet.centre.vrs_stream import VrsStreamEncoder
+
+    return VrsStreamEncoder(msm_level)
+
+
 def network_solver(stations: dict, master: str | None = None):
     from augnet.centre.network import NetworkSolver
 
