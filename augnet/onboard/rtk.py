@@ -265,6 +265,14 @@ class _FixAttempt:
     sigma_m: float
 
 
+def fix_policy(opt: RtkOptions) -> FixPolicy:
+    """The onboard RTK's ambiguity-fixing policy: the settings' thresholds, at most MAX_PARTIAL_FIX_TRIES
+    searches per epoch and biased floats screened out before their search."""
+    return FixPolicy(min_success_rate=opt.min_success_rate, ratio_threshold=opt.ratio_threshold,
+                     min_count=opt.min_fix_ambiguities, max_tries=MAX_PARTIAL_FIX_TRIES,
+                     biased_float_false_alarm=BIASED_FLOAT_FALSE_ALARM)
+
+
 def _take(sp: SatPositions, idx) -> SatPositions:
     """The satellite states of a subset of an epoch's satellites."""
     return SatPositions(*(a[idx] for a in sp))
@@ -813,12 +821,6 @@ class RtkFilter:
     # -----------------------------------------------------------------------------------------
     # integer ambiguity resolution
 
-    def _fix_policy(self) -> FixPolicy:
-        opt = self.opt
-        return FixPolicy(min_success_rate=opt.min_success_rate, ratio_threshold=opt.ratio_threshold,
-                         min_count=opt.min_fix_ambiguities, max_tries=MAX_PARTIAL_FIX_TRIES,
-                         biased_float_false_alarm=BIASED_FLOAT_FALSE_ALARM)
-
     def _resolve(self, sol: RtkSolution, dd: DDIndex, ep: _CommonEpoch, sd: SingleDifferences,
                  x_lin: np.ndarray) -> None:
         """Integer ambiguity resolution on this epoch's DD ambiguities; on success `sol` becomes FIX.
@@ -937,7 +939,7 @@ class RtkFilter:
         a_dd = D @ self.x[idx]
         Q_dd = D @ self.P[np.ix_(idx, idx)] @ D.T
         try:
-            fix = partial_fix(a_dd, Q_dd, self._fix_policy())
+            fix = partial_fix(a_dd, Q_dd, fix_policy(self.opt))
         except AmbiguityError as exc:
             return f"float: ambiguity covariance unusable ({exc})"
         if fix is None:

@@ -380,8 +380,8 @@ def partial_fixes(a_hat, Q) -> dict:
     call it here with each estimator's settings."""
     from augnet.centre.baseline import BaselineConfig
     from augnet.gnss.ambiguity import partial_fix
-    from augnet.onboard.rtk import RtkOptions, bounded_partial_fix
+    from augnet.onboard.rtk import RtkOptions, fix_policy
 
-    c, o = BaselineConfig(), RtkOptions()
+    c = BaselineConfig()
     return {"centre": partial_fix(a_hat, Q, c.fix_min_success_rate, c.fix_ratio, c.fix_min_count),
-            "onboard": bounded_partial_fix(a_hat, Q, o.min_success_rate, o.ratio_threshold, o.min_fix_ambiguities)}
+            "onboard": partial_fix(a_hat, Q, fix_policy(RtkOptions()))}
