@@ -131,7 +131,12 @@ def markdown(cls, title: str) -> str:
     lines = [f"# {title}", "", f"Generated from `{cls.__module__}.{cls.__qualname__}`; do not edit by hand.", "",
              "| setting | default | unit | meaning | source |", "| --- | --- | --- | --- | --- |"]
     for r in table(cls):
-        default = "" if r.default is MISSING else repr(r.default)
+        if r.default is MISSING:
+            default = ""
+        elif dataclasses.is_dataclass(r.default):
+            default = f"{type(r.default).__name__}()"  # a group of settings at its own defaults
+        else:
+            default = repr(r.default)
         if r.choices:
             doc = f"{r.doc} (one of {', '.join(map(repr, r.choices))})"
         else:
@@ -139,3 +144,40 @@ def markdown(cls, title: str) -> str:
         cells = [f"`{r.name}`", f"`{default}`", r.unit, doc, r.source]
         lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+# The generated reference pages: (page name under docs/options/, module, settings class, title).
+PAGES = (
+    ("rtk", "augnet.onboard.rtk", "RtkOptions", "Onboard RTK settings (`augnet rtk --opt NAME=VALUE`)"),
+)
+
+
+def page(name: str) -> str:
+    """The generated text of docs/options/<name>.md."""
+    import importlib
+
+    for page_name, module, cls_name, title in PAGES:
+        if page_name == name:
+            return markdown(getattr(importlib.import_module(module), cls_name), title)
+    raise KeyError(f"no options page {name!r} (known: {', '.join(p[0] for p in PAGES)})")
+
+
+def write_pages(folder) -> list:
+    """Write every page of PAGES into `folder` (docs/options); returns the paths written."""
+    from pathlib import Path
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    written = []
+    for name, *_ in PAGES:
+        path = folder / f"{name}.md"
+        path.write_text(page(name), encoding="utf-8")
+        written.append(path)
+    return written
+
+
+if __name__ == "__main__":  # python -m augnet.options docs/options
+    import sys
+
+    for p in write_pages(sys.argv[1] if len(sys.argv) > 1 else "docs/options"):
+        print(p)

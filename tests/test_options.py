@@ -34,3 +34,14 @@ def test_reference_page_lists_every_row():
     assert [r.name for r in table(_Demo)] == ["ratio", "tries", "hold", "mode", "sigma_m", "systems"]
     assert all(f"`{r.name}`" in page for r in table(_Demo)) and "RTKLIB pos2-arthres" in page
     check(_Demo())
+
+
+def test_the_committed_options_pages_are_the_generated_ones():
+    from pathlib import Path
+
+    from augnet.options import PAGES, page
+
+    docs = Path(__file__).resolve().parents[1] / "docs" / "options"
+    for name, *_ in PAGES:
+        assert (docs / f"{name}.md").read_text(encoding="utf-8") == page(name), (
+            f"docs/options/{name}.md is stale: regenerate with `python -m augnet.options docs/options`")

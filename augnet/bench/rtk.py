@@ -99,12 +99,12 @@ def warm_up() -> None:
     import numpy as np
 
     from augnet.onboard.atmosphere import klobuchar_l1_m
-    from augnet.onboard.rtk import bounded_partial_fix
+    from augnet.gnss.ambiguity import BIASED_FLOAT_FALSE_ALARM, FixPolicy, partial_fix
 
     rng = np.random.default_rng(0)
     A = rng.standard_normal((6, 6))
     Q = A @ A.T * 1e-3 + np.eye(6) * 1e-3
-    bounded_partial_fix(rng.standard_normal(6) * 3.0, Q, 0.999, 3.0, 4)
+    partial_fix(rng.standard_normal(6) * 3.0, Q, FixPolicy(biased_float_false_alarm=BIASED_FLOAT_FALSE_ALARM))
     klobuchar_l1_m(1.4e9, 0.6, 2.0, np.zeros(3), np.ones(3), (0.0,) * 4, (7.2e4,) * 4)
 
 

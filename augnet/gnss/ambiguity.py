@@ -13,10 +13,13 @@ Written for this project from the published algorithms; nothing here touches I/O
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
-from math import erf, sqrt
+from math import erf, inf, sqrt
 
 import numpy as np
+
+from augnet.gnss.statistics import chi2_quantile
 
 # A permutation in the reduction is only worth doing when it lowers D[j+1] by more than this (relative
 # tolerance against round-off looping; Chang et al. 2005 use the same kind of guard).
@@ -29,6 +32,16 @@ except ImportError:  # pragma: no cover
 
 DEFAULT_RATIO_THRESHOLD = 3.0  # RTKLIB's default pos2-arthres; common in commercial engines (2-3)
 DEFAULT_MIN_SUCCESS_RATE = 0.999  # bootstrapped success rate asked of a (partial) fix
+DEFAULT_MIN_COUNT = 4  # fewest ambiguities fixed (RTKLIB's minimum of 4 for a position)
+# A float vector is called biased when its bootstrapped solution's norm fails a chi-square test at this
+# false-alarm probability AND the RMS of the conditional fractions exceeds BIASED_FLOAT_RMS_CYC: with a
+# success rate >= 0.999 every conditional sigma is below ~0.15 cycle, so 0.2 is well outside noise; the
+# RMS test as well because under fix-and-hold the covariance is far below the true (time-correlated) error.
+BIASED_FLOAT_FALSE_ALARM = 1e-6
+BIASED_FLOAT_RMS_CYC = 0.2
+# A DD ambiguity counts as determined by a fix when its conditional sigma is below this [cycles]: 0.05
+# cycle leaves a rounding error probability below 1e-20.
+DETERMINED_SIGMA_CYC = 0.05
 
 
 class AmbiguityError(ValueError):
@@ -39,8 +52,27 @@ def ldl(Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Factor a symmetric positive-definite Q as L^T diag(D) L with L unit lower triangular.
 
     Factoring from the last index means D[n-1] is the unconditional variance of the last component and
-    D[k] the variance of component k conditioned on components k+1..n-1.
+    D[k] the variance of component k conditioned on components k+1..n-1.  Computed by LAPACK's Cholesky:
+    with J the order reversal, J Q J = C C^T gives Q = U U^T for the upper triangular U = J C J, so
+    D = diag(U)^2 and L = diag(U)^-1 U^T; equal to `ldl_reference` to rounding, and two orders of
+    magnitude faster for the 30-80 ambiguities of a multi-GNSS epoch.
     """
+    Q = np.asarray(Q, dtype=float)
+    if Q.ndim != 2 or Q.shape[0] != Q.shape[1]:
+        raise AmbiguityError(f"covariance must be square, got {Q.shape}")
+    if not np.all(np.isfinite(Q)):
+        raise AmbiguityError("covariance is not positive definite")
+    try:
+        C = np.linalg.cholesky(Q[::-1, ::-1])
+    except np.linalg.LinAlgError:
+        raise AmbiguityError("covariance is not positive definite") from None
+    U = C[::-1, ::-1]
+    u = np.diag(U).copy()
+    return U.T / u[:, None], u * u
+
+
+def ldl_reference(Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """`ldl` by rank-one downdates in plain numpy (the reference the LAPACK form is tested against)."""
     A = np.array(Q, dtype=float, copy=True)
     n = A.shape[0]
     if A.shape != (n, n):
@@ -284,41 +316,177 @@ class PartialFix:
         return self.z_fixed.shape[0]
 
 
+class FixedIntegers(Mapping):
+    """Integer double-difference ambiguities [cycles] by (satellite, reference satellite, frequency slot):
+    what a fix determined, immutable.
+
+    `dd(sat, ref, slot)` also answers for any pair whose two satellites are both fixed against one common
+    reference (z(s, r) = z(s, R) - z(r, R)), so two sets fixed against different references compare
+    (`agrees_with`).
+    """
+
+    __slots__ = ("_z",)
+
+    def __init__(self, items=()):
+        pairs = items.items() if isinstance(items, Mapping) else items
+        self._z = {(str(s), str(r), int(f)): int(z) for (s, r, f), z in pairs}
+
+    @classmethod
+    def determined(cls, keys, x: np.ndarray, P: np.ndarray, i: np.ndarray, iref: np.ndarray,
+                   max_sigma_cyc: float = DETERMINED_SIGMA_CYC) -> "FixedIntegers":
+        """The DD ambiguities x[i] - x[iref] (state indices of single-difference ambiguities, one pair per
+        key) whose sigma under covariance P is below `max_sigma_cyc`, rounded."""
+        var = P[i, i] + P[iref, iref] - 2.0 * P[i, iref]
+        val = x[i] - x[iref]
+        return cls((key, int(round(a))) for key, a, v in zip(keys, val, var) if v < max_sigma_cyc**2)
+
+    def __getitem__(self, key) -> int:
+        return self._z[key]
+
+    def __iter__(self) -> Iterator[tuple[str, str, int]]:
+        return iter(self._z)
+
+    def __len__(self) -> int:
+        return len(self._z)
+
+    def __repr__(self) -> str:
+        return f"FixedIntegers({self._z!r})"
+
+    __hash__ = None  # a mapping: compared by value, like a dict
+
+    def dd(self, sat: str, ref: str, slot: int) -> int | None:
+        """The integer DD ambiguity of sat against ref in a slot, directly or through a common reference;
+        None when this set does not determine it."""
+        if sat == ref:
+            return 0
+        if (sat, ref, slot) in self._z:
+            return self._z[(sat, ref, slot)]
+        if (ref, sat, slot) in self._z:
+            return -self._z[(ref, sat, slot)]
+        for common in {r for (_, r, f) in self._z if f == slot}:
+            a = 0 if sat == common else self._z.get((sat, common, slot))
+            b = 0 if ref == common else self._z.get((ref, common, slot))
+            if a is not None and b is not None:
+                return a - b
+        return None
+
+    def agrees_with(self, other: Mapping) -> bool:
+        """Whether every DD ambiguity of `other` that this set also determines has the same integer."""
+        return all(self.dd(s, r, f) in (None, z) for (s, r, f), z in other.items())
+
+
+@dataclass(frozen=True)
+class FixPolicy:
+    """How partial ambiguity resolution picks and accepts a fix: the one policy of both estimators.
+
+    The trailing blocks of the decorrelated ambiguities (largest first) whose bootstrapped success rate
+    reaches `min_success_rate` and that hold at least `min_count` ambiguities are candidates; the first
+    whose integer solution passes the ratio test is the fix.  `max_tries` bounds the searches per call
+    (None: every candidate).  `biased_float_false_alarm` (None: no screening) skips a block whose float
+    values are too far from every integer to pass anyway (see BIASED_FLOAT_FALSE_ALARM), before its
+    search is spent.
+    """
+
+    min_success_rate: float = DEFAULT_MIN_SUCCESS_RATE
+    ratio_threshold: float = DEFAULT_RATIO_THRESHOLD
+    min_count: int = DEFAULT_MIN_COUNT
+    max_tries: int | None = None
+    biased_float_false_alarm: float | None = None
+    biased_float_rms_cyc: float = BIASED_FLOAT_RMS_CYC
+
+
 def partial_fix(
     a_hat: np.ndarray,
     Q: np.ndarray,
-    min_success_rate: float = DEFAULT_MIN_SUCCESS_RATE,
-    ratio_threshold: float = DEFAULT_RATIO_THRESHOLD,
-    min_count: int = 4,
+    policy: FixPolicy | float | None = None,
+    ratio_threshold: float | None = None,
+    min_count: int | None = None,
+    min_success_rate: float | None = None,
 ) -> PartialFix | None:
-    """Partial ambiguity resolution (Teunissen et al. 1999): fix the largest trailing block of the
-    decorrelated ambiguities whose bootstrapped success rate reaches min_success_rate and whose integer
-    solution passes the ratio test. In the L^T D L ordering the trailing block is self-contained (its own
-    factors are the trailing block of L and D), so it is searched on its own. None when nothing can be fixed.
+    """Partial ambiguity resolution (Teunissen et al. 1999) under `policy` (a `FixPolicy`; None: the
+    defaults): fix the largest trailing block of the decorrelated ambiguities whose bootstrapped success
+    rate reaches the policy's minimum and whose integer solution passes the ratio test.  In the L^T D L
+    ordering the trailing block is self-contained (its own factors are the trailing block of L and D), so
+    it is searched on its own; a failing ratio on a block with a high success rate means the float
+    solution disagrees with its covariance, so smaller blocks, without the worst-determined parts, are
+    tried next.  None when nothing can be fixed.
+
+    The form `partial_fix(a_hat, Q, min_success_rate, ratio_threshold, min_count)` (positional or by
+    keyword) is the policy FixPolicy(min_success_rate, ratio_threshold, min_count).
     """
+    policy = _policy(policy, ratio_threshold, min_count, min_success_rate)
     a_hat = np.asarray(a_hat, dtype=float)
     n = a_hat.shape[0]
-    if n < max(min_count, 1):
+    if n < max(policy.min_count, 1):
         return None
     Q = 0.5 * (np.asarray(Q, dtype=float) + np.asarray(Q, dtype=float).T)
     L, D = ldl(Q)
     L, D, Z = reduce(L, D)
     zs = Z.T @ a_hat
-    # bootstrapped success rate of every trailing block at once: products of the per-ambiguity factors
-    factors = np.array([2.0 * _phi(1.0 / (2.0 * sqrt(d))) - 1.0 for d in D])
-    trailing = np.cumprod(factors[::-1])[::-1]
-    for start in range(0, n - min_count + 1):
-        Dsub = D[start:]
-        p = float(trailing[start])
-        if p < min_success_rate:
+    trailing = trailing_success_rates(D)
+    starts = [k for k in range(0, n - policy.min_count + 1) if trailing[k] >= policy.min_success_rate]
+    for start in starts[:policy.max_tries]:
+        if _biased(L[start:, start:], D[start:], zs[start:], policy):
             continue
-        cand, norms = search(L[start:, start:], Dsub, zs[start:], 2)
-        ratio = float(norms[1] / norms[0]) if norms[0] > 0 else np.inf
-        if ratio >= ratio_threshold:
-            return PartialFix(Zs=Z[:, start:], z_fixed=cand[0], ratio=ratio, success_rate=p)
-        # A failing ratio on a block with a high success rate means the float solution itself disagrees
-        # with its covariance; smaller blocks are tried, since they exclude the worst-determined parts.
+        cand, norms = search(L[start:, start:], D[start:], zs[start:], 2)
+        ratio = float(norms[1] / norms[0]) if norms[0] > 0 else inf
+        if ratio >= policy.ratio_threshold:
+            return PartialFix(Zs=Z[:, start:], z_fixed=cand[0], ratio=ratio, success_rate=float(trailing[start]))
     return None
+
+
+def _policy(policy, ratio_threshold, min_count, min_success_rate) -> FixPolicy:
+    """The FixPolicy of `partial_fix`'s arguments (a policy, or the three numbers of the older form)."""
+    if isinstance(policy, FixPolicy):
+        if ratio_threshold is not None or min_count is not None or min_success_rate is not None:
+            raise TypeError("give either a FixPolicy or min_success_rate, ratio_threshold, min_count")
+        return policy
+    if policy is not None and min_success_rate is not None:
+        raise TypeError("min_success_rate given twice")
+    rate = policy if policy is not None else min_success_rate
+    return FixPolicy(min_success_rate=DEFAULT_MIN_SUCCESS_RATE if rate is None else float(rate),
+                     ratio_threshold=DEFAULT_RATIO_THRESHOLD if ratio_threshold is None else float(ratio_threshold),
+                     min_count=DEFAULT_MIN_COUNT if min_count is None else int(min_count))
+
+
+def trailing_success_rates(D: np.ndarray) -> np.ndarray:
+    """The bootstrapped success rate of every trailing block D[k:] at once: products of the
+    per-ambiguity factors 2 Phi(1 / (2 sqrt(d))) - 1 (`bootstrap_success_rate` of one ambiguity)."""
+    factors = np.array([2.0 * _phi(1.0 / (2.0 * sqrt(d))) - 1.0 for d in D])
+    return np.cumprod(factors[::-1])[::-1]
+
+
+def _biased(L: np.ndarray, D: np.ndarray, zs: np.ndarray, policy: FixPolicy) -> bool:
+    """Whether a block's float values fail the policy's biased-float screening (never without one)."""
+    if policy.biased_float_false_alarm is None:
+        return False
+    q_boot, rms_frac = bootstrapped_norm(L, D, zs)
+    return q_boot > chi2_quantile(len(D), policy.biased_float_false_alarm) and rms_frac > policy.biased_float_rms_cyc
+
+
+def bootstrapped_norm(L: np.ndarray, D: np.ndarray, zs: np.ndarray) -> tuple[float, float]:
+    """(squared distance, RMS conditional fraction [cycles]) of the integer bootstrapping (sequential
+    conditional rounding) solution from the float ambiguities zs, in the metric of their covariance
+    L^T diag(D) L (last index first)."""
+    if _kernels is not None:
+        return _kernels.bootstrapped_norm_kernel(L, D, zs)
+    return bootstrapped_norm_reference(L, D, zs)
+
+
+def bootstrapped_norm_reference(L: np.ndarray, D: np.ndarray, zs: np.ndarray) -> tuple[float, float]:
+    """`bootstrapped_norm` in plain Python (the reference the compiled kernel is tested against)."""
+    n = len(D)
+    z = np.zeros(n)
+    zb = np.zeros(n)
+    dist = 0.0
+    for k in range(n - 1, -1, -1):
+        acc = 0.0
+        for j in range(k + 1, n):
+            acc += (z[j] - zb[j]) * L[j, k]
+        zb[k] = zs[k] + acc
+        z[k] = np.round(zb[k])
+        dist += (zb[k] - z[k]) ** 2 / D[k]
+    return dist, float(np.sqrt(np.mean((zb - z) ** 2)))
 
 
 def condition_on_fixed(

@@ -134,3 +134,19 @@ def search_kernel(L, D, zs, m):
             y = zb[k] - z[k]
             step[k] = -step[k] - (1.0 if step[k] > 0 else -1.0)
     return cand[:count], norms[:count]
+
+
+@njit(cache=True)
+def bootstrapped_norm_kernel(L, D, zs):
+    n = len(D)
+    z = np.zeros(n)
+    zb = np.zeros(n)
+    dist = 0.0
+    for k in range(n - 1, -1, -1):
+        acc = 0.0
+        for j in range(k + 1, n):
+            acc += (z[j] - zb[j]) * L[j, k]
+        zb[k] = zs[k] + acc
+        z[k] = np.round(zb[k])
+        dist += (zb[k] - z[k]) ** 2 / D[k]
+    return dist, np.sqrt(np.mean((zb - z) ** 2))

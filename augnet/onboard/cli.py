@@ -2,8 +2,9 @@
 
     augnet rtk --rover R.obs --base B.obs --nav N.nav --base-pos X,Y,Z|LAT,LON,H --out sol.csv
 
-`--base-pos header` takes the base file's APPROX POSITION.  Exit status 0 when every epoch was
-processed (whatever its status), 2 for unusable inputs.
+`--base-pos header` takes the base file's APPROX POSITION.  `--opt NAME=VALUE` (repeatable) sets any
+field of the settings table `RtkOptions` (docs/options/rtk.md), after the flags.  Exit status 0 when every
+epoch was processed (whatever its status), 2 for unusable inputs.
 """
 
 from __future__ import annotations
@@ -35,6 +36,8 @@ def rtk(
     hold: Annotated[bool, typer.Option("--hold/--no-hold", help="fix-and-hold")] = True,
     base_kind: Annotated[str, typer.Option("--base-kind", help="auto (the base file's MARKER TYPE: NON_PHYSICAL is a "
                                            "VRS), station, or vrs (estimate the network's residual ionosphere)")] = "auto",
+    opt_assignments: Annotated[list[str] | None, typer.Option("--opt", help="NAME=VALUE: any RTK setting "
+                                                              "(docs/options/rtk.md); repeatable")] = None,
 ) -> None:
     """Post-process RTK: rover + base RINEX -> solution CSV (time, ECEF, geodetic, status, ratio, sigmas)."""
     from augnet.onboard.inputs import InputError, load_nav, load_obs, parse_position
@@ -42,6 +45,7 @@ def rtk(
     from augnet.onboard.rtk import RtkOptions
     from augnet.onboard.solution import write_csv
     from augnet.onboard.spp import SppOptions
+    from augnet.options import OptionError, with_assignments
 
     if mode not in ("kinematic", "static"):
         raise typer.BadParameter("mode must be kinematic or static", param_hint="--mode")
@@ -52,8 +56,19 @@ def rtk(
         raise typer.BadParameter("1, 2 or 3", param_hint="--frequencies")
     if base_kind not in ("auto", "station", "vrs"):
         raise typer.BadParameter("auto, station or vrs", param_hint="--base-kind")
+    opt = RtkOptions(
+        mode=mode, dynamics=dynamics, elevation_mask_rad=math.radians(elevation_mask), systems=sys_,
+        n_slots=frequencies, ratio_threshold=ratio, min_success_rate=success_rate, max_age_s=max_age,
+        fix_and_hold=hold,
+        spp=SppOptions(elevation_mask_rad=math.radians(min(elevation_mask, 10.0)), systems=sys_),
+    )
+    try:
+        opt = with_assignments(opt, opt_assignments or [])
+    except OptionError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--opt") from None
     try:
         navdata, alpha, beta = load_nav(nav)
+        opt.spp.klobuchar_alpha, opt.spp.klobuchar_beta = alpha, beta
         rov = load_obs(rover)
         bas = load_obs(base)
         if base_pos.strip().lower() == "header":
@@ -65,13 +80,6 @@ def rtk(
     except InputError as exc:
         typer.echo(f"augnet rtk: {exc}", err=True)
         raise typer.Exit(2)
-    opt = RtkOptions(
-        mode=mode, dynamics=dynamics, elevation_mask_rad=math.radians(elevation_mask), systems=sys_,
-        n_slots=frequencies, ratio_threshold=ratio, min_success_rate=success_rate, max_age_s=max_age,
-        fix_and_hold=hold,
-        spp=SppOptions(elevation_mask_rad=math.radians(min(elevation_mask, 10.0)), klobuchar_alpha=alpha,
-                       klobuchar_beta=beta, systems=sys_),
-    )
     sols = process(rov, bas, navdata, bp, opt, base_is_vrs=None if base_kind == "auto" else base_kind == "vrs")
     counts: dict[str, int] = {}
 

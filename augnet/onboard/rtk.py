@@ -1,43 +1,36 @@
 """Real-time kinematic positioning: an extended Kalman filter on double differences, with integer
-ambiguity resolution (LAMBDA, partial fixing, ratio test and bootstrapped success rate) and
-fix-and-hold.
+ambiguity resolution (LAMBDA, partial fixing, ratio test and bootstrapped success rate), fix
+confirmation and fix-and-hold.
 
-State: rover ECEF position (and velocity and acceleration when the dynamic model is on), then one
-*single-difference* (rover minus base) carrier ambiguity per satellite and frequency slot, in
-cycles.  Measurements are double differences (per system and slot, against that group's highest
-satellite) of phase and code; forming DDs in the measurement model rather than in the state lets
-satellites rise and set and the reference change without touching the state.
+State (`StateLayout`): rover ECEF position (and velocity and acceleration when the dynamic model is on),
+then one *single-difference* (rover minus base) carrier ambiguity per satellite and frequency slot, in
+cycles, and with the ionosphere in the model one SD ionospheric delay per satellite.  Measurements are
+double differences (per system and slot, against that group's highest satellite) of phase and code,
+formed in the measurement model (`double_difference.py`) so satellites rise and set and the reference
+changes without touching the state.
 
-Atmosphere.  The troposphere model is applied at each receiver.  On a short baseline (under ~7 km) the
-DD ionosphere is millimetres and is not modelled: the filter fixes from the first epoch.  Against a
-network VRS (RINEX MARKER TYPE NON_PHYSICAL, RTCM DF141 = 1) or a longer baseline the filter is
-*ionosphere-weighted*: one SD ionospheric delay per satellite is a state with a prior of sigma0 times
-the thin-shell mapping function (sigma0 2 cm for a VRS -- the network's interpolation residual --
-or 2 mm per km of baseline), phase sees -mu I and code +mu I, and code is weighted down (300:1) since
-the base's multipath is correlated over minutes.  A relative zenith troposphere state was tried and
-left out: over a minute it cannot be told from the height (network-70km VRS: V95 1.9 -> 4.4 cm) and
-the VRS's non-dispersive DD residuals measured there are ~0.5 cm.
+Atmosphere.  The troposphere model is applied at each receiver.  On a short baseline the DD ionosphere
+is millimetres and is not modelled: the filter fixes from the first epoch.  Against a network VRS
+(RINEX MARKER TYPE NON_PHYSICAL, RTCM DF141 = 1) or a longer baseline the filter is
+*ionosphere-weighted* (`ionosphere_prior.py`) and code is weighted down, since the base's multipath is
+correlated over minutes.  No relative zenith troposphere state: over a minute it cannot be told from the
+height (docs/decisions/0080-rtk-model-and-validation.md).
 
-Validation.  LAMBDA with partial fixing (the largest decorrelated block with a bootstrapped success
-rate >= 0.999 that passes the ratio test), a fixed position sigma <= 3 cm, DD phase residuals <= 5 cm
-after fixing (else the worst satellite is left out and the search repeated; with the ionosphere
-estimated, the lowest satellite), and with the ionosphere in the model a fix is declared only when
-3 consecutive epochs' validated integer decisions agree: a partial fix that passed every test but pins
-too few combinations for the 3 cm (the wide-lane-like ones come first) is such a decision, the fix
-declared is a complete one (network-70km VRS switch-ons: median time to first fix 11 -> 9 s); a
-satellite whose ambiguity restarted (a slip) is, like a rising one, left out of the comparison.  The
-rover losing lock (overbridge, tunnel, up to a minute) keeps its SD ionosphere states, grown by their
-random walk over the outage: the new ambiguities are fixed against them (demo re-fixes 7 -> 2 s).
-Fix-and-hold after 5 declared fixes.
-The covariance of a fixed solution is the float covariance conditioned on the fixed combinations, so
-it carries the estimated ionosphere's uncertainty: protection levels K sigma bound the error in
-every simulated epoch measured (baseline-10km, network-70km with a VRS under quiet to active
-ionosphere, single-base 35 km).
+Validation (`_resolve`).  Partial fixing under one `FixPolicy` (`augnet.gnss.ambiguity`), a fixed
+position sigma <= MAX_FIXED_POSITION_SIGMA_M, DD phase residuals <= MAX_FIXED_PHASE_RESIDUAL_M after
+fixing (else the worst satellite is left out and the search repeated; with the ionosphere estimated, the
+lowest satellite), and with the ionosphere in the model a fix is declared only when consecutive epochs'
+validated integer decisions agree (`FixConfirmation`).  The rover losing lock keeps its SD ionosphere
+states, so new ambiguities are fixed against them.  Fix-and-hold after HOLD_AFTER_FIXES declared fixes.
+The covariance of a fixed solution is the float covariance conditioned on the fixed combinations, so it
+carries the estimated ionosphere's uncertainty.
 
 Status per epoch (RTKLIB's Q codes so tools compare): FIX (1) when a validated integer set is
 applied, FLOAT (2), SINGLE (5) when the rover falls back to SPP (no or stale corrections, base
 inconsistent, filter diverged), NONE (0) when not even SPP is possible.  `step` never raises on
 data; each solution carries a message saying why it is what it is.
+
+Settings: `RtkOptions` (one table; docs/options/rtk.md is generated from it).
 """
 
 from __future__ import annotations
@@ -48,35 +41,44 @@ from enum import IntEnum
 from typing import Sequence
 
 import numpy as np
-from numba import njit
 from threadpoolctl import ThreadpoolController
 
-from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
-from augnet.gnss.ambiguity import (
-    AmbiguityError,
-    PartialFix,
-    reduce,
-    search,
-)
+from augnet.gnss.ambiguity import AmbiguityError, FixedIntegers, FixPolicy, PartialFix, partial_fix
+from augnet.gnss.ambiguity import BIASED_FLOAT_FALSE_ALARM
 from augnet.gnss.ephemeris import NavigationData
-from augnet.gnss.ionosphere import thin_shell_mapping
-from augnet.onboard.atmosphere import saastamoinen_m
+from augnet.gnss.fix_confirmation import FixConfirmation, IntegerDecision
+from augnet.gnss.state_layout import StateLayout
+from augnet.onboard import ionosphere_prior
 from augnet.onboard.cycleslip import BASE_GF_DRIFT_M_S, BASE_GF_SLIP_THRESHOLD_M, SlipDetector
-from augnet.onboard.observations import BAND_FREQ_HZ, SYSTEM_BANDS, EpochObs
+from augnet.onboard.double_difference import (
+    AMB_KNOWN_SIGMA_CYC,
+    DDIndex,
+    Rows,
+    SingleDifferences,
+    ZeroDifferences,
+    choose_groups,
+    dd_index,
+    dd_rows,
+    first_wavelength,
+    phase_residuals,
+    phase_variance,
+    single_differences,
+    slipped_keys,
+    zero_differences,
+)
+from augnet.onboard.motion import predict_pva
+from augnet.onboard.observations import EpochObs
 from augnet.onboard.spp import (
     SELECTION_CACHE_S,
     SatPositions,
     SppOptions,
     SppResult,
-    azimuth_elevation_from,
-    chi2_quantile,
     doppler_velocity,
     first_code,
-    geometric_range,
-    receiver_frame,
     satellite_positions,
     solve_spp,
 )
+from augnet.options import setting
 
 
 class Status(IntEnum):
@@ -86,17 +88,14 @@ class Status(IntEnum):
     SINGLE = 5
 
 
-# Carrier-phase noise sigma^2 = a^2 + b^2/sin^2(el) per receiver [m] (RTKLIB's defaults, typical of
-# geodetic and good automotive receivers); code noise is the phase noise times this ratio.
-PHASE_SIGMA_A_M = 0.003
-PHASE_SIGMA_B_M = 0.003
+SOLUTION_STATUS_NAMES = {Status.NONE: "none", Status.FIX: "fix", Status.FLOAT: "float", Status.SINGLE: "single"}
+
+# --- internal constants (not settings: the model's own figures) -----------------------------------
+# Code noise over phase noise with a short-baseline model (RTKLIB's default eratio1 = 100).
 CODE_PHASE_ERROR_RATIO = 100.0
 # ... and with the ionosphere estimated (VRS, medium baselines): code then also carries the base's (for
-# a VRS, the master station's) multipath, correlated over minutes on a static antenna, which a filter
-# treating code as white noise would trust too much; its float would sit tens of cm off with a
-# covariance claiming a few, and the integer search would fail or fix wrongly.  300 is RTKLIB EX's
-# default (demo5 eratio1); measured on network-70km with the centre's VRS, 8 starts: median time to
-# first fix 15 -> 8 s, fixed after the first fix 87 -> 100 %.
+# a VRS, the master station's) multipath, correlated over minutes, which a filter treating code as white
+# noise would trust too much.  RTKLIB EX's default (demo5 eratio1); docs/decisions/0080.
 CODE_PHASE_ERROR_RATIO_WITH_IONOSPHERE = 300.0
 # Initial standard deviations of new states.
 INIT_POSITION_SIGMA_M = 30.0
@@ -105,41 +104,24 @@ INIT_ACCELERATION_SIGMA_M_S2 = 10.0
 INIT_AMBIGUITY_SIGMA_CYC = 30.0
 # Random-walk process noise of a single-difference ambiguity [cycles / sqrt(s)].
 AMBIGUITY_PROCESS_SIGMA_CYC = 1e-4
-# Acceleration process noise (white jerk) [m/s^2 / sqrt(s)]: horizontal and vertical.  A train
-# brakes at ~1 m/s^2 and accelerates slower; a road vehicle changes faster, hence 3 by default.
-ACCEL_PROCESS_SIGMA_H = 3.0
-ACCEL_PROCESS_SIGMA_V = 1.0
-# Corrections older than this are stale: RTK is abandoned for SPP.  Network RTK practice: corrections
-# normally arrive under 2 s old and must stay under 5 s (../shared/design/network-rtk.md); in
-# post-processing a missing base epoch simply ages the last one.
-DEFAULT_MAX_AGE_S = 5.0
-# Beyond this baseline [m] the short-baseline model (no DD ionosphere) breaks down; also, a base
-# position given wrong by more than this cannot be RTK'd against.
-DEFAULT_MAX_BASELINE_M = 100_000.0
 # The base's own SPP must agree with its given coordinates within this [m], or the coordinates (or
 # the base data) are wrong and a "fixed" rover would be wrong by the same amount.
 BASE_POSITION_TOLERANCE_M = 100.0
-# ... measured by this many SPP steps from the given coordinates (the first step lands within a
-# millimetre of the converged solution when the coordinates are within a few hundred metres, and
-# anything farther fails the check anyway; the second makes the step size itself a small number)
+# SPP steps from a known start: the first lands within a millimetre of the converged solution when the
+# start is within a few hundred metres (anything farther fails the checks anyway); the second makes the
+# step itself a small number.
 BASE_CHECK_SPP_STEPS = 2
 ROVER_SPP_STEPS = 2
 # Prefit screening: code DD innovations beyond this [m] are blunders; a phase DD whose ambiguity is
-# already known (sigma below AMB_KNOWN_SIGMA_CYC) and whose innovation exceeds
+# established (double_difference.AMB_KNOWN_SIGMA_CYC) and whose innovation exceeds
 # max(PHASE_INNOVATION_SIGMAS * sigma, PHASE_INNOVATION_MIN_M) is a slip the detectors missed.
 MAX_CODE_INNOVATION_M = 30.0
 PHASE_INNOVATION_SIGMAS = 6.0
 PHASE_INNOVATION_MIN_M = 0.10
-AMB_KNOWN_SIGMA_CYC = 0.5
 # Phase observations of a satellite not updated for more epochs than this lose their ambiguity.
 MAX_AMBIGUITY_OUTAGE_EPOCHS = 5
-# An SD ionosphere state not observed for longer than this [s] is dropped.  It is an atmospheric quantity,
-# not a tracking one: across a shorter outage (an overbridge, a tunnel, a satellite behind a cutting) it
-# is kept with the uncertainty its random walk has gathered (IONO_PROCESS_FRACTION_PER_SQRT_S: 23 % of
-# its prior sigma after a minute), and a satellite re-acquired with new ambiguities is fixed against it.
-MAX_IONO_OUTAGE_S = 60.0
-# Fix-and-hold: after this many consecutive fixes the integers are fed back into the float filter
-# as pseudo-observations with this variance [cycles^2] (RTKLIB uses 0.001 cycle^2 as well).
+# Fix-and-hold: after this many consecutive fixes the integers are fed back into the float filter as
+# pseudo-observations with this variance [cycles^2] (RTKLIB's VAR_HOLDAMB is 0.001 cycle^2 as well).
 HOLD_AFTER_FIXES = 5
 HOLD_VARIANCE_CYC2 = 0.001
 # A time step longer than this [s] restarts the position/velocity part of the filter.
@@ -160,73 +142,73 @@ LINEARISATION_MAX_RMS_M = 0.03
 # Fixed solutions failing the residual check are retried this many times, each without the worst
 # satellite (RTKLIB-EX and commercial engines exclude satellites the same way).
 AR_EXCLUSION_RETRIES = 3
-# A fixed solution must have a 3-D position sigma below this [m] (a fix that only pins a few
-# ambiguity combinations leaves decimetres: it is still a float solution; with 3 cm the vertical
-# sigma of a fix stays under ~2.5 cm, what a 4 cm vertical 95 % figure needs).
+# A fixed solution must have a 3-D position sigma below this [m]: a fix that only pins a few ambiguity
+# combinations leaves decimetres and is still a float solution; 3 cm keeps the vertical sigma of a fix
+# under ~2.5 cm, what a 4 cm vertical 95 % figure needs.
 MAX_FIXED_POSITION_SIGMA_M = 0.03
-# Partial ambiguity resolution tries at most this many nested subsets per search: each integer
-# search costs up to ~0.5 s in Python on a poor float solution, and a rover must keep up with 1 Hz.
+# Partial ambiguity resolution tries at most this many nested subsets per epoch: each integer search
+# costs up to ~0.5 s on a poor float solution, and a rover must keep up with 1 Hz.
 MAX_PARTIAL_FIX_TRIES = 8
-# False-alarm probability of the chi-square test that a float ambiguity vector is consistent with
-# its covariance (the bootstrapped solution's norm), before an integer search is spent on it.
-FLOAT_CONSISTENCY_FALSE_ALARM = 1e-6
-# ... and the RMS of the conditional fractional parts [cycles] beyond which it is called biased: with a
-# success rate >= 0.999 every conditional sigma is below ~0.15 cycles, so 0.2 is well outside noise.
-BIASED_FLOAT_RMS_CYC = 0.2
 # The float position may differ from the epoch's SPP by the SPP's error; beyond this [m] plus five
 # SPP sigmas the filter has gone wrong.
 SPP_CONSISTENCY_M = 30.0
+# A float position covariance trace beyond this [m^2] means the filter diverged.
+MAX_FLOAT_COVARIANCE_TRACE_M2 = 1e6
 # Fixed solutions whose DD phase residuals exceed this [m] are rejected (wrong fix).
 MAX_FIXED_PHASE_RESIDUAL_M = 0.05
-# Ionosphere-weighted model (medium baselines and network VRS).  The single-difference (rover - base)
-# ionospheric delay on each satellite's first frequency is a state with a prior sigma of
-# sigma0 * M(el), M the thin-shell mapping function; phase sees -mu I and code +mu I, mu = (f1/f)^2.
-# sigma0 for a physical base grows with the baseline: 3 mm per km (RTKLIB's default 0.03 m per 10 km;
-# quiet mid-latitude DD ionosphere is 1-4 ppm, network-rtk.md).  For a network VRS it is the network's
-# interpolation residual: 1-3 cm DD at 30-70 km spacing (network-rtk.md: Tang et al. 2016; "better than
-# 3 cm under 100 km"), i.e. about 2 cm single-difference.
-IONO_SIGMA_PER_M = 2.0e-6
-VRS_IONO_SIGMA_M = 0.02
-# Below this prior sigma [m] (baselines under ~5 km) the DD ionosphere is left out of the model: the
-# short-baseline model is then exact to millimetres and fixes from the first epoch.
-IONO_ESTIMATE_MIN_SIGMA_M = 0.015
-# Random walk of the SD ionosphere, as a fraction of sigma0 per sqrt(s): a 2 cm VRS residual may drift
-# by ~1 cm over 100 s (the interpolation error changes with the satellites' pierce points).
-IONO_PROCESS_FRACTION_PER_SQRT_S = 0.03
 # With the ionosphere in the model, a validated fix is declared only when the same integers have been
 # found in this many consecutive epochs (a biased float can pass one epoch's tests by chance).
 CONFIRM_EPOCHS_WITH_IONOSPHERE = 3
-# A DD ambiguity counts as determined by a fix when its conditional sigma is below this [cycles].
-CONFIRM_SIGMA_CYC = 0.05
-SOLUTION_STATUS_NAMES = {Status.NONE: "none", Status.FIX: "fix", Status.FLOAT: "float", Status.SINGLE: "single"}
+# The message of an epoch where no ambiguity subset passed (the cue to leave a satellite out).
+NO_SUBSET_MESSAGE = "float: no ambiguity subset passed ratio and success-rate tests"
 
 
 @dataclass
 class RtkOptions:
-    mode: str = "kinematic"  # 'kinematic' or 'static'
-    dynamics: bool = False  # kinematic only: position-velocity-acceleration model (else white position)
-    elevation_mask_rad: float = math.radians(15.0)
-    systems: Sequence[str] = ("G", "E", "C", "J")
-    n_slots: int = 2
-    phase_sigma_a_m: float = PHASE_SIGMA_A_M
-    phase_sigma_b_m: float = PHASE_SIGMA_B_M
-    code_phase_ratio: float | None = None  # None: CODE_PHASE_ERROR_RATIO, or ..._WITH_IONOSPHERE
-    ratio_threshold: float = 3.0
-    min_success_rate: float = 0.999
-    min_fix_ambiguities: int = 4
-    fix_and_hold: bool = True
-    ambiguity_resolution: bool = True
-    max_age_s: float = DEFAULT_MAX_AGE_S
-    max_baseline_m: float = DEFAULT_MAX_BASELINE_M
-    # 'auto': estimate the SD ionosphere per satellite for a VRS or beyond ~5 km; 'estimate': always;
-    # 'off': never (the short-baseline model)
-    ionosphere: str = "auto"
-    iono_sigma_m: float | None = None  # prior sigma of the SD vertical ionosphere [m]; None: from the base
-    vrs_iono_sigma_m: float = VRS_IONO_SIGMA_M
-    confirm_epochs: int | None = None  # consecutive agreeing fixes before FIX; None: 1, or 3 with ionosphere
-    accel_sigma_h: float = ACCEL_PROCESS_SIGMA_H
-    accel_sigma_v: float = ACCEL_PROCESS_SIGMA_V
-    spp: SppOptions = field(default_factory=SppOptions)
+    """The onboard RTK's settings: one table (docs/options/rtk.md, `augnet rtk --opt NAME=VALUE`)."""
+
+    mode: str = setting("kinematic", doc="rover motion model", choices=("kinematic", "static"),
+                        source="RTKLIB pos1-posmode")
+    dynamics: bool = setting(False, doc="kinematic only: position-velocity-acceleration model (else a white "
+                             "position restarted from SPP every epoch)", source="RTKLIB pos1-dynamics")
+    elevation_mask_rad: float = setting(math.radians(15.0), unit="rad", doc="satellites below are not used",
+                                        source="RTKLIB pos1-elmask (15 deg)")
+    systems: Sequence[str] = setting(("G", "E", "C", "J"), doc="GNSS used, comma-separated system letters")
+    n_slots: int = setting(2, doc="frequency slots used per system (1: L1/E1/B1I, 2: dual, 3: triple)",
+                           source="RTKLIB pos1-frequency")
+    phase_sigma_a_m: float = setting(0.003, unit="m", doc="carrier-phase noise a of sigma^2 = a^2 + "
+                                     "b^2/sin^2(el), per receiver", source="RTKLIB stats-errphase")
+    phase_sigma_b_m: float = setting(0.003, unit="m", doc="carrier-phase noise b (elevation term), per receiver",
+                                     source="RTKLIB stats-errphaseel")
+    code_phase_ratio: float | None = setting(None, doc="code over phase noise; None: 100, or 300 with the "
+                                             "ionosphere estimated", source="RTKLIB stats-eratio1; RTKLIB EX demo5")
+    ratio_threshold: float = setting(3.0, doc="ratio test (second best over best squared norm) a fix must pass",
+                                     source="RTKLIB pos2-arthres")
+    min_success_rate: float = setting(0.999, doc="bootstrapped success rate a fixed subset must reach",
+                                      source="Teunissen 1999 (partial ambiguity resolution)")
+    min_fix_ambiguities: int = setting(4, doc="fewest ambiguities in a fix, and agreeing functionals in a "
+                                       "confirmation (4 fix a position)")
+    fix_and_hold: bool = setting(True, doc="feed fixed integers back into the float filter after "
+                                 f"{HOLD_AFTER_FIXES} declared fixes", source="RTKLIB pos2-armode=fix-and-hold")
+    ambiguity_resolution: bool = setting(True, doc="resolve integer ambiguities (off: float only)")
+    max_age_s: float = setting(5.0, unit="s", doc="corrections older than this are stale: SPP instead",
+                               source="network RTK practice: under 2 s normally, 5 s at most "
+                               "(../shared/design/network-rtk.md)")
+    max_baseline_m: float = setting(100_000.0, unit="m", doc="beyond this the RTK model breaks down (and a "
+                                    "base position wrong by more cannot be RTK'd against): SPP instead")
+    ionosphere: str = setting("auto", doc="SD ionosphere per satellite: auto (for a VRS or beyond ~7 km), "
+                              "estimate (always), off (short-baseline model)", choices=("auto", "estimate", "off"))
+    iono_sigma_m: float | None = setting(None, unit="m", doc="prior sigma of the SD vertical ionosphere; None: "
+                                         "vrs_iono_sigma_m for a VRS, else 2 mm per km of baseline")
+    vrs_iono_sigma_m: float = setting(0.02, unit="m", doc="prior sigma of the SD vertical ionosphere against a "
+                                      "network VRS (the network's interpolation residual)",
+                                      source="1-3 cm DD at 30-70 km spacing (network-rtk.md: Tang et al. 2016)")
+    confirm_epochs: int | None = setting(None, doc="consecutive agreeing fixes before FIX; None: 1, or 3 with "
+                                         "the ionosphere estimated")
+    accel_sigma_h: float = setting(3.0, unit="m/s^2/sqrt(s)", doc="dynamics: horizontal white-jerk process "
+                                   "noise (a train brakes at ~1 m/s^2; a road vehicle changes faster)")
+    accel_sigma_v: float = setting(1.0, unit="m/s^2/sqrt(s)", doc="dynamics: vertical white-jerk process noise")
+    spp: SppOptions = setting(default_factory=SppOptions, doc="the single-point solution's settings (a group)")
 
 
 @dataclass
@@ -243,9 +225,9 @@ class RtkSolution:
     baseline_m: float = math.nan
     velocity_m_s: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
     message: str = ""
-    # a FIX: (satellite, reference satellite, frequency slot) -> integer DD ambiguity [cycles] of every DD
-    # ambiguity the fix determines (conditional sigma below CONFIRM_SIGMA_CYC), for checks against a truth
-    fixed_dd: dict[tuple[str, str, int], int] = field(default_factory=dict)
+    # a FIX: every DD ambiguity the fix determines (conditional sigma below
+    # augnet.gnss.ambiguity.DETERMINED_SIGMA_CYC), for checks against a truth
+    fixed_dd: FixedIntegers = field(default_factory=FixedIntegers)
 
     @property
     def status_name(self) -> str:
@@ -253,30 +235,57 @@ class RtkSolution:
 
 
 @dataclass
-class _Group:
-    """The DD rows of one system and slot at one epoch."""
-    sats: list[int]  # indices into the epoch's satellite list; first is the reference
-    slot: int
+class _CommonEpoch:
+    """The satellites common to rover and base at one epoch, with what the measurement model needs of them."""
+    t: float
+    sats: list[str]
+    sys_: np.ndarray  # system letter per satellite
+    rover: EpochObs
+    base: EpochObs
+    sp_rover: SatPositions
+    nf: int  # frequency slots used
+    valid: np.ndarray  # satellite states usable at both ends, same issue of data
+    zd_base: ZeroDifferences
+    wl: np.ndarray  # (n, nf) rover wavelengths [m]
+    same_wl: np.ndarray  # (n, nf) the base observed the same wavelength
+    mu: np.ndarray  # (n, nf) ionospheric scale of each slot against the system's first frequency
+    slips: np.ndarray  # (n, nf) a slip at either end
+    base_slipped_all: np.ndarray  # (n,) every slot of the base slipped
 
 
 @dataclass
-class _DD:
-    """One epoch's double differences as parallel index arrays (one entry per non-reference satellite
-    and slot): epoch satellite indices, slot, group, and the state indices of the SD ambiguities and
-    (when estimated) SD ionospheres involved."""
-    k: np.ndarray
-    ref: np.ndarray
-    f: np.ndarray
-    group: np.ndarray
-    i: np.ndarray
-    iref: np.ndarray
-    ion: np.ndarray | None
-    ion_ref: np.ndarray | None
+class _FixAttempt:
+    """A fix of some DD rows: the fixed combinations Hc x = fix.z_fixed over the full state, the
+    conditioned state, the DD phase residuals it leaves [m] and its 3-D position sigma [m]."""
+    fix: PartialFix
+    Hc: np.ndarray
+    x: np.ndarray
+    P: np.ndarray
+    residuals: np.ndarray
+    sigma_m: float
 
 
-def _first_wavelength(system: str) -> float:
-    """Wavelength [m] of a system's first frequency (slot 0: L1, E1, B1I), the ionosphere's reference."""
-    return SPEED_OF_LIGHT_M_S / BAND_FREQ_HZ[(system, SYSTEM_BANDS[system][0])]
+def fix_policy(opt: RtkOptions) -> FixPolicy:
+    """The onboard RTK's ambiguity-fixing policy: the settings' thresholds, at most MAX_PARTIAL_FIX_TRIES
+    searches per epoch and biased floats screened out before their search."""
+    return FixPolicy(min_success_rate=opt.min_success_rate, ratio_threshold=opt.ratio_threshold,
+                     min_count=opt.min_fix_ambiguities, max_tries=MAX_PARTIAL_FIX_TRIES,
+                     biased_float_false_alarm=BIASED_FLOAT_FALSE_ALARM)
+
+
+def _take(sp: SatPositions, idx) -> SatPositions:
+    """The satellite states of a subset of an epoch's satellites."""
+    return SatPositions(*(a[idx] for a in sp))
+
+
+_BLAS_CONTROLLER: ThreadpoolController | None = None
+
+
+def _blas_controller() -> ThreadpoolController:
+    global _BLAS_CONTROLLER
+    if _BLAS_CONTROLLER is None:
+        _BLAS_CONTROLLER = ThreadpoolController()
+    return _BLAS_CONTROLLER
 
 
 class RtkFilter:
@@ -289,29 +298,28 @@ class RtkFilter:
         self.base_position_m = np.asarray(base_position_m, dtype=float)
         # a computed (non-physical) base, a network VRS: its residual atmosphere is modelled
         self.base_is_vrs = bool(base_is_vrs)
-        self.ion_index: dict[str, int] = {}
-        self.ion_seen: dict[str, float] = {}  # when each SD ionosphere state was last observed
-        self.iono_active = False
-        self._iono_sigma_now = 0.0
-        self._candidate: tuple | None = None  # the last validated integer decision (see `_decision`)
-        self._candidate_count = 0
-        self._last_solution: tuple[float, np.ndarray, np.ndarray] | None = None
-        self._spp_inputs: tuple | None = None
         self.n_kin = 9 if (self.opt.mode == "kinematic" and self.opt.dynamics) else 3
-        self.x = np.zeros(self.n_kin)
-        self.P = np.zeros((self.n_kin, self.n_kin))
-        self.amb_index: dict[tuple[str, int], int] = {}
-        self._free: list[int] = []
-        self.amb_outage: dict[tuple[str, int], int] = {}
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget every estimate: the next epoch starts the filter afresh (same settings, base, ephemerides)."""
+        # position [, velocity, acceleration], then ("amb", sat, slot) and ("ion", sat) blocks of one state
+        self.layout = StateLayout(np.zeros(self.n_kin), np.zeros((self.n_kin, self.n_kin)), reuse_freed=True)
+        self.amb_outage: dict[tuple[str, int], int] = {}  # epochs since each SD ambiguity was last used
         # a serial number per ambiguity state: a slip re-initialises it under the same key, a new arc
         self.amb_serial: dict[tuple[str, int], int] = {}
         self._serials = 0
+        self.ion_seen: dict[str, float] = {}  # when each SD ionosphere state was last observed
+        self.iono_active = False
+        self._iono_sigma_now = 0.0
+        self.confirmation = FixConfirmation(self.opt.min_fix_ambiguities)
+        self.consecutive_fixes = 0
+        self._last_solution: tuple[float, np.ndarray, np.ndarray] | None = None
+        self._spp_inputs: tuple | None = None
         self.initialised = False
         self.t_prev = math.nan
         self.rover_slips = SlipDetector()
         self.base_slips = SlipDetector(gf_threshold_m=BASE_GF_SLIP_THRESHOLD_M, gf_drift_m_s=BASE_GF_DRIFT_M_S)
-        self.consecutive_fixes = 0
-        self.last_fix: tuple[PartialFix, np.ndarray, np.ndarray] | None = None
         self._base_checked_time = math.nan
         self._base_ok = True
         self._base_msg = ""
@@ -319,56 +327,54 @@ class RtkFilter:
     # -----------------------------------------------------------------------------------------
     # state bookkeeping
 
-    def reset(self) -> None:
-        self.__init__(self.nav, self.base_position_m, self.opt, self.base_is_vrs)
+    @property
+    def x(self) -> np.ndarray:
+        return self.layout.x
 
-    def _new_amb(self, key, value, var) -> int:
-        i = self._new_state(value, var)
-        self.amb_index[key] = i
+    @x.setter
+    def x(self, value: np.ndarray) -> None:
+        self.layout.x = value
+
+    @property
+    def P(self) -> np.ndarray:
+        return self.layout.P
+
+    @P.setter
+    def P(self, value: np.ndarray) -> None:
+        self.layout.P = value
+
+    def amb_state(self, key: tuple[str, int]) -> int | None:
+        """The state index of the SD ambiguity of (satellite, slot), None when there is none."""
+        return self.layout.get(("amb",) + key)
+
+    def ion_state(self, sat: str) -> int | None:
+        """The state index of a satellite's SD ionosphere, None when there is none."""
+        return self.layout.get(("ion", sat))
+
+    def _amb_indices(self) -> list[int]:
+        return [i for key, i in self.layout.items() if key[0] == "amb"]
+
+    def _ion_indices(self) -> list[int]:
+        return [i for key, i in self.layout.items() if key[0] == "ion"]
+
+    def _new_amb(self, key: tuple[str, int], value: float) -> None:
+        self.layout.add(("amb",) + key, value, INIT_AMBIGUITY_SIGMA_CYC**2)
         self.amb_outage[key] = 0
         self._serials += 1
         self.amb_serial[key] = self._serials
-        return i
 
-    def _new_ion(self, sat: str, var: float, t: float) -> int:
-        i = self._new_state(0.0, var)
-        self.ion_index[sat] = i
-        self.ion_seen[sat] = t
-        return i
-
-    def _drop_ion(self, sat: str) -> None:
-        i = self.ion_index.pop(sat, None)
-        self.ion_seen.pop(sat, None)
-        if i is not None:
-            self._free_state(i)
-
-    def _new_state(self, value, var) -> int:
-        if self._free:
-            i = self._free.pop()
-        else:
-            i = len(self.x)
-            self.x = np.append(self.x, 0.0)
-            P = np.zeros((i + 1, i + 1))
-            P[:i, :i] = self.P
-            self.P = P
-        self.x[i] = value
-        self.P[i, :] = 0.0
-        self.P[:, i] = 0.0
-        self.P[i, i] = var
-        return i
-
-    def _free_state(self, i: int) -> None:
-        self.x[i] = 0.0
-        self.P[i, :] = 0.0
-        self.P[:, i] = 0.0
-        self._free.append(i)
-
-    def _drop_amb(self, key) -> None:
-        i = self.amb_index.pop(key, None)
+    def _drop_amb(self, key: tuple[str, int]) -> None:
         self.amb_outage.pop(key, None)
         self.amb_serial.pop(key, None)
-        if i is not None:
-            self._free_state(i)
+        self.layout.remove([("amb",) + key])
+
+    def _new_ion(self, sat: str, var: float, t: float) -> None:
+        self.layout.add(("ion", sat), 0.0, var)
+        self.ion_seen[sat] = t
+
+    def _drop_ion(self, sat: str) -> None:
+        self.ion_seen.pop(sat, None)
+        self.layout.remove([("ion", sat)])
 
     # -----------------------------------------------------------------------------------------
 
@@ -413,16 +419,7 @@ class RtkFilter:
         t = rover.time
         # satellite states once per receiver and epoch, shared by SPP, RTK and the Doppler velocity
         sp_rover = satellite_positions(self.nav, rover.sats, t, first_code(rover))
-        # From the filter's position (within metres of the code solution) two SPP steps are exact to a
-        # fraction of a millimetre, all RTK needs of it (a prior of 30 m, a 30 m consistency check); a
-        # SINGLE solution, which reports the SPP itself, iterates it to convergence (see `_single`).
-        initial = self.x[:3].copy() if self.initialised else None
-        self._spp_inputs = (rover, sp_rover, initial)
-        spp = solve_spp(rover, self.nav, self._spp_options(), initial_m=initial, sat_positions=sp_rover,
-                        steps=ROVER_SPP_STEPS if initial is not None else None)
-        if not spp.ok and self.initialised:
-            # the filter's position may be the problem
-            spp = solve_spp(rover, self.nav, self._spp_options(), sat_positions=sp_rover)
+        spp = self._rover_spp(rover, sp_rover)
         if base is None:
             self._time_update(t, spp, advance_only=True)
             return self._single(t, spp, "no base observations")
@@ -434,19 +431,8 @@ class RtkFilter:
             return self._single(t, spp, "no rover position to start from", age)
         # Base satellites with the rover's ephemeris selection (both ends use the same issue of data).
         sp_base = satellite_positions(self.nav, base.sats, base.time, first_code(base), t_select=t)
-        # The base's coordinates must be consistent with its data (checked once per base epoch).
         if base.time != self._base_checked_time:
-            self._base_checked_time = base.time
-            # its own SPP selects ephemerides at its own time: the same states when that is the same choice
-            same_selection = math.floor(base.time / SELECTION_CACHE_S) == math.floor(t / SELECTION_CACHE_S)
-            bspp = solve_spp(base, self.nav, self._spp_options(), initial_m=self.base_position_m,
-                             sat_positions=sp_base if same_selection else None, steps=BASE_CHECK_SPP_STEPS)
-            if bspp.ok:
-                d = float(np.linalg.norm(bspp.position_m - self.base_position_m))
-                self._base_ok = d <= BASE_POSITION_TOLERANCE_M
-                self._base_msg = f"base position inconsistent with base data by {d:.0f} m"
-            else:
-                self._base_ok, self._base_msg = True, ""
+            self._check_base(base, sp_base, t)
         if not self._base_ok:
             self._time_update(t, spp, advance_only=True)
             return self._single(t, spp, self._base_msg, age)
@@ -457,8 +443,35 @@ class RtkFilter:
             return self._single(t, spp, f"baseline {baseline / 1e3:.0f} km beyond {opt.max_baseline_m / 1e3:.0f} km", age)
 
         self._time_update(t, spp)
-        sol = self._measurement_update(rover, base, spp, age, baseline, sp_rover, sp_base)
-        return sol
+        return self._measurement_update(rover, base, spp, age, baseline, sp_rover, sp_base)
+
+    def _rover_spp(self, rover: EpochObs, sp_rover: SatPositions) -> SppResult:
+        """The rover's code solution.  From the filter's position (within metres of the code solution) two
+        SPP steps are exact to a fraction of a millimetre, all RTK needs of it (a prior of 30 m, a 30 m
+        consistency check); a SINGLE solution, which reports the SPP itself, iterates it to convergence
+        (see `_single`)."""
+        initial = self.x[:3].copy() if self.initialised else None
+        self._spp_inputs = (rover, sp_rover, initial)
+        spp = solve_spp(rover, self.nav, self._spp_options(), initial_m=initial, sat_positions=sp_rover,
+                        steps=ROVER_SPP_STEPS if initial is not None else None)
+        if not spp.ok and self.initialised:
+            # the filter's position may be the problem
+            spp = solve_spp(rover, self.nav, self._spp_options(), sat_positions=sp_rover)
+        return spp
+
+    def _check_base(self, base: EpochObs, sp_base: SatPositions, t: float) -> None:
+        """Whether the base's coordinates are consistent with its data (once per base epoch)."""
+        self._base_checked_time = base.time
+        # its own SPP selects ephemerides at its own time: the same states when that is the same choice
+        same_selection = math.floor(base.time / SELECTION_CACHE_S) == math.floor(t / SELECTION_CACHE_S)
+        bspp = solve_spp(base, self.nav, self._spp_options(), initial_m=self.base_position_m,
+                         sat_positions=sp_base if same_selection else None, steps=BASE_CHECK_SPP_STEPS)
+        if bspp.ok:
+            d = float(np.linalg.norm(bspp.position_m - self.base_position_m))
+            self._base_ok = d <= BASE_POSITION_TOLERANCE_M
+            self._base_msg = f"base position inconsistent with base data by {d:.0f} m"
+        else:
+            self._base_ok, self._base_msg = True, ""
 
     # -----------------------------------------------------------------------------------------
     # time update
@@ -466,255 +479,90 @@ class RtkFilter:
     def _time_update(self, t: float, spp: SppResult, advance_only: bool = False) -> None:
         dt = t - self.t_prev if np.isfinite(self.t_prev) else math.inf
         self.t_prev = t
-        nk = self.n_kin
-        # ambiguity random walk
         if np.isfinite(dt) and dt > 0:
-            for i in self.amb_index.values():
-                self.P[i, i] += AMBIGUITY_PROCESS_SIGMA_CYC**2 * dt
-            q_ion = (IONO_PROCESS_FRACTION_PER_SQRT_S * self._iono_sigma_now) ** 2 * dt
-            for i in self.ion_index.values():
-                self.P[i, i] += q_ion
+            self._random_walk(dt)
         if advance_only and not self.initialised:
             return
         restart = (not self.initialised) or dt > MAX_PREDICTION_GAP_S or dt <= 0
         if self.opt.mode == "static" and not restart:
             return
         if self.opt.mode == "kinematic" and self.n_kin == 3 or restart:
-            # white position (RTKLIB's 'dynamics off'): start from SPP every epoch
-            if not spp.ok:
-                if not self.initialised:
-                    return
-                if restart or self.n_kin == 3:
-                    # no fresh position: keep the old one with a generous uncertainty
-                    self.P[:3, :] = 0.0
-                    self.P[:, :3] = 0.0
-                    self.P[:3, :3] = np.eye(3) * INIT_POSITION_SIGMA_M**2
-                    return
-            else:
-                self.x[:3] = spp.position_m
-                self.P[:nk, :] = 0.0
-                self.P[:, :nk] = 0.0
-                self.P[:3, :3] = np.eye(3) * INIT_POSITION_SIGMA_M**2
-                if nk == 9:
-                    self.x[3:9] = 0.0
-                    self.P[3:6, 3:6] = np.eye(3) * INIT_VELOCITY_SIGMA_M_S**2
-                    self.P[6:9, 6:9] = np.eye(3) * INIT_ACCELERATION_SIGMA_M_S2**2
-                self.initialised = True
+            if self._restart_position(spp, restart):
                 return
+        if self.n_kin == 9:
+            predict_pva(self.x, self.P, dt, self.opt.accel_sigma_h, self.opt.accel_sigma_v)
+
+    def _random_walk(self, dt: float) -> None:
+        """The ambiguities' and ionospheres' random walk over dt [s]."""
+        for i in self._amb_indices():
+            self.P[i, i] += AMBIGUITY_PROCESS_SIGMA_CYC**2 * dt
+        q_ion = ionosphere_prior.process_variance(self._iono_sigma_now, dt)
+        for i in self._ion_indices():
+            self.P[i, i] += q_ion
+
+    def _restart_position(self, spp: SppResult, restart: bool) -> bool:
+        """White position (RTKLIB's 'dynamics off'), or a restart: the kinematic states from SPP.  False
+        when the dynamic model is to predict them instead (no fresh SPP on an unbroken PVA filter)."""
+        nk = self.n_kin
+        if not spp.ok:
+            if not self.initialised:
+                return True
+            if restart or self.n_kin == 3:
+                # no fresh position: keep the old one with a generous uncertainty
+                self.P[:3, :] = 0.0
+                self.P[:, :3] = 0.0
+                self.P[:3, :3] = np.eye(3) * INIT_POSITION_SIGMA_M**2
+                return True
+            return False
+        self.x[:3] = spp.position_m
+        self.P[:nk, :] = 0.0
+        self.P[:, :nk] = 0.0
+        self.P[:3, :3] = np.eye(3) * INIT_POSITION_SIGMA_M**2
         if nk == 9:
-            F = np.eye(9)
-            F[0:3, 3:6] = np.eye(3) * dt
-            F[0:3, 6:9] = np.eye(3) * 0.5 * dt * dt
-            F[3:6, 6:9] = np.eye(3) * dt
-            self.x[:9] = F @ self.x[:9]
-            Pk = self.P[:9, :9]
-            Pka = self.P[:9, 9:]
-            self.P[:9, :9] = F @ Pk @ F.T
-            self.P[:9, 9:] = F @ Pka
-            self.P[9:, :9] = self.P[:9, 9:].T
-            # white-jerk noise on acceleration, in local ENU then rotated to ECEF
-            _, R = receiver_frame(self.x[:3])
-            q = R.T @ np.diag([self.opt.accel_sigma_h**2, self.opt.accel_sigma_h**2, self.opt.accel_sigma_v**2]) @ R
-            # continuous white jerk integrated over dt: the exact discrete Q of the PVA model
-            self.P[6:9, 6:9] += q * dt
-            self.P[3:6, 3:6] += q * dt**3 / 3.0
-            self.P[0:3, 0:3] += q * dt**5 / 20.0
-            self.P[3:6, 6:9] += q * dt**2 / 2.0
-            self.P[6:9, 3:6] += q * dt**2 / 2.0
-            self.P[0:3, 6:9] += q * dt**3 / 6.0
-            self.P[6:9, 0:3] += q * dt**3 / 6.0
-            self.P[0:3, 3:6] += q * dt**4 / 8.0
-            self.P[3:6, 0:3] += q * dt**4 / 8.0
+            self.x[3:9] = 0.0
+            self.P[3:6, 3:6] = np.eye(3) * INIT_VELOCITY_SIGMA_M_S**2
+            self.P[6:9, 6:9] = np.eye(3) * INIT_ACCELERATION_SIGMA_M_S2**2
+        self.initialised = True
+        return True
 
     # -----------------------------------------------------------------------------------------
     # measurement update
-
-    def _zero_diff(self, obs: EpochObs, rx_m: np.ndarray, sp):
-        """Observed minus modelled (range, troposphere, satellite clock) per satellite and slot [m],
-        for phase and code, and the line-of-sight unit vectors and elevations."""
-        rng, los = geometric_range(np.where(sp.valid[:, None], sp.position_m, rx_m + 1.0), rx_m)
-        llh, rot = receiver_frame(rx_m)
-        az, el = azimuth_elevation_from(rx_m, rot, np.where(sp.valid[:, None], sp.position_m, rx_m + np.array([0, 0, 1.0])))
-        trop = saastamoinen_m(llh[0], llh[2], el)
-        model = rng + trop - SPEED_OF_LIGHT_M_S * sp.clock_s
-        phase = obs.phase_cyc * obs.wavelength_m - model[:, None]
-        code = obs.code_m - model[:, None]
-        return phase, code, los, el
-
-    def _variance(self, el: np.ndarray) -> np.ndarray:
-        s = np.maximum(np.sin(el), 0.05)
-        return self.opt.phase_sigma_a_m**2 + self.opt.phase_sigma_b_m**2 / s**2
-
-    def _iono_sigma0(self, baseline_m: float) -> float:
-        """Prior sigma [m] of the single-difference (rover - base) vertical ionospheric delay on the
-        first frequency: the user's figure, a network VRS's residual, or growing with the baseline."""
-        if self.opt.iono_sigma_m is not None:
-            return float(self.opt.iono_sigma_m)
-        if self.base_is_vrs:
-            return float(self.opt.vrs_iono_sigma_m)
-        return IONO_SIGMA_PER_M * baseline_m
 
     def _measurement_update(self, rover: EpochObs, base: EpochObs, spp: SppResult, age: float,
                             baseline_m: float, sp_rover: SatPositions, sp_base: SatPositions) -> RtkSolution:
         opt = self.opt
         t = rover.time
-        # common satellites
-        common, ri, bi = np.intersect1d(rover.sats, base.sats, return_indices=True)
-        sysmask = np.isin(np.array([s[0] for s in common]), list(opt.systems))
-        common, ri, bi = common[sysmask], ri[sysmask], bi[sysmask]
-        rslip = self.rover_slips.detect(rover)
-        bslip = self.base_slips.detect(base)
-        nf = min(opt.n_slots, rover.n_slots, base.n_slots)
-        if len(common) == 0:
-            return self._float_or_single(t, spp, age, 0, "no satellites common to rover and base")
-        ro = rover.take(ri)
-        bo = base.take(bi)
-        slips = rslip[ri, :nf] | bslip[bi, :nf]
-        sp_r = _take(sp_rover, ri)
-        sp_b = _take(sp_base, bi)
-        valid = sp_r.valid & sp_b.valid
-        # same issue of data at both ends, or the orbit error does not cancel
-        valid &= sp_r.ephemeris_index == sp_b.ephemeris_index
-        phase_b, code_b, _, el_b = self._zero_diff(bo, self.base_position_m, sp_b)
-        wl = ro.wavelength_m[:, :nf]
-        same_wl = np.isclose(wl, bo.wavelength_m[:, :nf], rtol=0, atol=1e-9)
-        sats = [str(s) for s in ro.sats]
-        sys_ = np.array([s[0] for s in sats])
-        # ionospheric scale of each slot against the system's first frequency: (f1 / f)^2
-        mu = (wl / np.array([_first_wavelength(s) for s in sys_])[:, None]) ** 2
-
-        # handle slips: reset those ambiguities, and the satellite's ionosphere when every slot of the
-        # base slipped (a VRS whose data for it were re-synthesised steps by the correction).  The rover
-        # losing lock (an overbridge, a tunnel) changes its ambiguities, not the atmosphere: the SD
-        # ionosphere state is kept, with the uncertainty it has gathered (random walk) over the outage,
-        # and the new ambiguities are resolved against it.
-        base_all = bslip[bi, :nf].all(axis=1)
-        for k, sat in enumerate(sats):
-            for f in range(nf):
-                if slips[k, f]:
-                    self._drop_amb((sat, f))
-            if self.iono_active and base_all[k]:
-                self._drop_ion(sat)
-        # outage bookkeeping
-        for key in list(self.amb_outage):
-            self.amb_outage[key] += 1
-            if self.amb_outage[key] > MAX_AMBIGUITY_OUTAGE_EPOCHS:
-                self._drop_amb(key)
-        for sat, seen in list(self.ion_seen.items()):
-            if not t - seen <= MAX_IONO_OUTAGE_S:
-                self._drop_ion(sat)
-
+        ep = self._common_epoch(rover, base, sp_rover, sp_base)
+        if ep is None:
+            return self._single(t, spp, "no satellites common to rover and base", age)
+        self._restart_slipped(ep)
+        self._expire_states(t)
         # linearisation point: the state's position, or for a white-noise position (kinematic without
         # dynamics, restarted from SPP every epoch) the last solution carried by its velocity, usually
         # within centimetres of where this update lands, so one linearisation serves
         x_rov = self._predicted_position(t)
-        phase_r, code_r, los_r, el_r = self._zero_diff(ro, x_rov, sp_r)
-        ok_sat = valid & (el_r >= opt.elevation_mask_rad) & np.isfinite(el_b)
-        sd_phase = phase_r[:, :nf] - phase_b[:, :nf]
-        sd_code = code_r[:, :nf] - code_b[:, :nf]
-        ok = ok_sat[:, None] & np.isfinite(sd_phase) & np.isfinite(sd_code) & same_wl & np.isfinite(wl)
-        var_sd = (self._variance(el_r) + self._variance(el_b))[:, None] * np.ones((1, nf))
-        # ionosphere: switched on for a VRS or a baseline long enough to need it, then kept
-        sigma0 = self._iono_sigma0(baseline_m)
-        if opt.ionosphere == "estimate" or (opt.ionosphere == "auto" and sigma0 >= IONO_ESTIMATE_MIN_SIGMA_M):
-            self.iono_active = True
-        self._iono_sigma_now = sigma0
-        # initialise missing ambiguities from code (cycles), and missing ionospheres at their prior
-        obs_sd_cyc = (ro.phase_cyc[:, :nf] - bo.phase_cyc[:, :nf]) - (ro.code_m[:, :nf] - bo.code_m[:, :nf]) / wl
-        for k, f in zip(*np.nonzero(ok)):
-            key = (sats[k], int(f))
-            if key not in self.amb_index:
-                self._new_amb(key, obs_sd_cyc[k, f], INIT_AMBIGUITY_SIGMA_CYC**2)
-        if self.iono_active:
-            mapping = thin_shell_mapping(el_r)
-            for k in np.flatnonzero(ok.any(axis=1)):
-                if sats[k] not in self.ion_index:
-                    self._new_ion(sats[k], (sigma0 * mapping[k]) ** 2, t)
-        groups = self._groups(sats, sys_, ok, el_r, nf)
+        sd = self._single_differences(ep, x_rov)
+        ok, var_sd = self._usable(ep, sd)
+        sigma0 = self._switch_ionosphere(baseline_m)
+        self._add_states(ep, ok, sd.el, sigma0)
+        groups = choose_groups(opt.systems, ep.sys_, ok, sd.el, ep.nf, self._amb_variances(ep.sats, ok))
         n_sat_used = len({k for g in groups for k in g.sats})
         if not groups:
-            return self._float_or_single(t, spp, age, 0, "too few common satellites above the mask")
-        dd = self._dd_index(groups, sats, nf)
-        v, H, R, kind = self._build_rows(dd, sd_phase, sd_code, los_r, wl, mu, var_sd)
-        v = v - H[:, :3] @ (self.x[:3] - x_rov)  # innovations against the prior state
-        # prefit screening
-        S_diag = np.einsum("ij,ij->i", H @ self.P, H) + np.diag(R)
-        m = len(dd.k)
-        phase_v = v[:m]
-        amb_sig2 = self.P[dd.i, dd.i]
-        known = amb_sig2 < AMB_KNOWN_SIGMA_CYC**2
-        bad_ph = known & (np.abs(phase_v) > np.maximum(PHASE_INNOVATION_SIGMAS * np.sqrt(S_diag[:m]), PHASE_INNOVATION_MIN_M))
-        if np.any(bad_ph):
-            # a slip: re-initialise the ambiguities involved and rebuild (the reference slipping
-            # shows as most of its group's rows failing together)
-            for key in self._slipped_keys(bad_ph, dd, sats):
-                self._drop_amb(key)
-                k = sats.index(key[0])
-                self._new_amb(key, obs_sd_cyc[k, key[1]], INIT_AMBIGUITY_SIGMA_CYC**2)
-            dd = self._dd_index(groups, sats, nf)
-            v, H, R, kind = self._build_rows(dd, sd_phase, sd_code, los_r, wl, mu, var_sd)
-            v = v - H[:, :3] @ (self.x[:3] - x_rov)
-        keep = ~((kind == 0) & (np.abs(v) > MAX_CODE_INNOVATION_M))
-        if not keep.all():
-            v, H, R = v[keep], H[keep], R[np.ix_(keep, keep)]
-        # With established ambiguities the phases alone place the rover to millimetres: linearise there
-        # (a 3-unknown least squares) rather than after a first full update from the SPP prior.
-        x_phase = self._phase_position(v, H, R, kind[keep], x_rov)
-        if x_phase is not None and np.linalg.norm(x_phase - x_rov) > RELINEARISE_M:
-            x_rov = x_phase
-            phase_r, code_r, los_r, el_r = self._zero_diff(ro, x_rov, sp_r)
-            sd_phase = phase_r[:, :nf] - phase_b[:, :nf]
-            sd_code = code_r[:, :nf] - code_b[:, :nf]
-            v, H, R, _ = self._build_rows(dd, sd_phase, sd_code, los_r, wl, mu, var_sd)
-            if not keep.all():
-                v, H, R = v[keep], H[keep], R[np.ix_(keep, keep)]
-            v = v - H[:, :3] @ (self.x[:3] - x_rov)
-        x_prior, P_prior = self.x.copy(), self.P.copy()
-        self._kalman_update(v, H, R)
-        # Iterated EKF step: when the update landed more than RELINEARISE_M from the linearisation
-        # point (a start from SPP), the troposphere and geometry at the rover are recomputed at the new
-        # point and the update redone from the same prior.  A few metres of height error in the
-        # linearisation point would otherwise bias the height by millimetres (tropospheric delay
-        # changes ~0.3 mm per metre of height).
-        if np.linalg.norm(self.x[:3] - x_rov) > RELINEARISE_M:
-            x_rov = self.x[:3].copy()
-            self.x, self.P = x_prior, P_prior
-            phase_r, code_r, los_r, el_r = self._zero_diff(ro, x_rov, sp_r)
-            sd_phase = phase_r[:, :nf] - phase_b[:, :nf]
-            sd_code = code_r[:, :nf] - code_b[:, :nf]
-            v2, H2, R2, _ = self._build_rows(dd, sd_phase, sd_code, los_r, wl, mu, var_sd)
-            if not keep.all():
-                v2, H2, R2 = v2[keep], H2[keep], R2[np.ix_(keep, keep)]
-            v2 = v2 - H2[:, :3] @ (x_prior[:3] - x_rov)
-            self._kalman_update(v2, H2, R2)
-        # ambiguities and ionospheres seen this epoch are fresh
-        for g in groups:
-            for k in g.sats:
-                key = (sats[k], g.slot)
-                if key in self.amb_outage:
-                    self.amb_outage[key] = 0
-                if sats[k] in self.ion_seen:
-                    self.ion_seen[sats[k]] = t
-        float_pos = self.x[:3].copy()
-        float_cov = self.P[:3, :3].copy()
-        sol = RtkSolution(t, Status.FLOAT, float_pos, float_cov, n_sat_used, age_s=age,
-                          baseline_m=float(np.linalg.norm(float_pos - self.base_position_m)),
-                          velocity_m_s=self.x[3:6].copy() if self.n_kin == 9 else np.full(3, np.nan),
-                          message="float")
-        if not np.all(np.isfinite(float_pos)) or np.trace(float_cov) > 1e6:
+            return self._single(t, spp, "too few common satellites above the mask", age)
+        dd = self._dd_index(groups, ep.sats)
+        dd, rows, keep = self._screened_rows(ep, dd, groups, sd, x_rov, var_sd)
+        x_rov, sd, rows = self._at_phase_position(ep, dd, rows, sd, x_rov, var_sd, keep)
+        x_rov, sd = self._iterated_update(ep, dd, rows, sd, x_rov, var_sd, keep)
+        self._mark_observed(groups, ep.sats, t)
+        sol = self._float_solution(t, n_sat_used, age)
+        failure = self._float_failure(sol, spp)
+        if failure:
             self.reset()
-            return self._single(t, spp, "filter diverged, restarted", age)
-        if spp.ok:
-            # The float solution must agree with the epoch's own code solution; when it does not, the
-            # filter has absorbed bad data: restart it rather than report a confident wrong position.
-            gap = float(np.linalg.norm(float_pos - spp.position_m))
-            if gap > SPP_CONSISTENCY_M + 5.0 * math.sqrt(max(np.trace(spp.covariance_m2), 0.0)):
-                self.reset()
-                return self._single(t, spp, f"filter {gap:.0f} m from SPP, restarted", age)
+            return self._single(t, spp, failure, age)
         if opt.ambiguity_resolution:
-            self._resolve(sol, dd, sats, sd_phase, los_r, wl, mu, x_rov, el_r)
+            self._resolve(sol, dd, ep, sd, x_rov)
         else:
-            self._confirm_reset()
+            self.confirmation.reset()
         if not np.all(np.isfinite(sol.velocity_m_s)):
             # no dynamic model: the velocity (for RMC, odometry) comes from the rover's Dopplers
             sol.velocity_m_s, _ = doppler_velocity(rover, self.nav, sol.position_m, opt.elevation_mask_rad,
@@ -722,15 +570,209 @@ class RtkFilter:
         self._last_solution = (t, sol.position_m.copy(), np.asarray(sol.velocity_m_s, dtype=float).copy())
         return sol
 
-    def _phase_position(self, v, H, R, kind, x_lin) -> np.ndarray | None:
+    def _common_epoch(self, rover: EpochObs, base: EpochObs, sp_rover: SatPositions,
+                      sp_base: SatPositions) -> _CommonEpoch | None:
+        """The satellites both receivers track in the systems used (None when there are none); runs the
+        slip detectors on both receivers' whole epochs."""
+        opt = self.opt
+        common, ri, bi = np.intersect1d(rover.sats, base.sats, return_indices=True)
+        sysmask = np.isin(np.array([s[0] for s in common]), list(opt.systems))
+        common, ri, bi = common[sysmask], ri[sysmask], bi[sysmask]
+        rslip = self.rover_slips.detect(rover)
+        bslip = self.base_slips.detect(base)
+        nf = min(opt.n_slots, rover.n_slots, base.n_slots)
+        if len(common) == 0:
+            return None
+        ro = rover.take(ri)
+        bo = base.take(bi)
+        sp_r = _take(sp_rover, ri)
+        sp_b = _take(sp_base, bi)
+        valid = sp_r.valid & sp_b.valid
+        # same issue of data at both ends, or the orbit error does not cancel
+        valid &= sp_r.ephemeris_index == sp_b.ephemeris_index
+        zd_base = zero_differences(bo, self.base_position_m, sp_b)
+        wl = ro.wavelength_m[:, :nf]
+        same_wl = np.isclose(wl, bo.wavelength_m[:, :nf], rtol=0, atol=1e-9)
+        sats = [str(s) for s in ro.sats]
+        sys_ = np.array([s[0] for s in sats])
+        mu = (wl / np.array([first_wavelength(s) for s in sys_])[:, None]) ** 2
+        return _CommonEpoch(rover.time, sats, sys_, ro, bo, sp_r, nf, valid, zd_base, wl, same_wl, mu,
+                            rslip[ri, :nf] | bslip[bi, :nf], bslip[bi, :nf].all(axis=1))
+
+    def _restart_slipped(self, ep: _CommonEpoch) -> None:
+        """Drop the ambiguities that slipped, and a satellite's ionosphere when every slot of the base
+        slipped (a VRS whose data for it were re-synthesised steps by the correction).  The rover losing
+        lock (an overbridge, a tunnel) changes its ambiguities, not the atmosphere: the SD ionosphere state
+        is kept, with the uncertainty its random walk has gathered, and new ambiguities are fixed against it."""
+        for k, sat in enumerate(ep.sats):
+            for f in range(ep.nf):
+                if ep.slips[k, f]:
+                    self._drop_amb((sat, f))
+            if self.iono_active and ep.base_slipped_all[k]:
+                self._drop_ion(sat)
+
+    def _expire_states(self, t: float) -> None:
+        """Drop ambiguities unused for over MAX_AMBIGUITY_OUTAGE_EPOCHS epochs and ionospheres unobserved
+        for over ionosphere_prior.MAX_IONO_OUTAGE_S."""
+        for key in list(self.amb_outage):
+            self.amb_outage[key] += 1
+            if self.amb_outage[key] > MAX_AMBIGUITY_OUTAGE_EPOCHS:
+                self._drop_amb(key)
+        for sat, seen in list(self.ion_seen.items()):
+            if not t - seen <= ionosphere_prior.MAX_IONO_OUTAGE_S:
+                self._drop_ion(sat)
+
+    def _usable(self, ep: _CommonEpoch, sd: SingleDifferences) -> tuple[np.ndarray, np.ndarray]:
+        """Which SD observations (satellite, slot) enter the model: satellite states valid at both ends,
+        above the mask, finite phase and code on the same wavelength; and their SD phase variances [m^2]."""
+        ok_sat = ep.valid & (sd.el >= self.opt.elevation_mask_rad) & np.isfinite(ep.zd_base.el)
+        ok = ok_sat[:, None] & np.isfinite(sd.phase) & np.isfinite(sd.code) & ep.same_wl & np.isfinite(ep.wl)
+        var_sd = (self._phase_variance(sd.el) + self._phase_variance(ep.zd_base.el))[:, None] * np.ones((1, ep.nf))
+        return ok, var_sd
+
+    def _single_differences(self, ep: _CommonEpoch, x_rov: np.ndarray) -> SingleDifferences:
+        """The epoch's SDs with the rover model evaluated at x_rov."""
+        return single_differences(zero_differences(ep.rover, x_rov, ep.sp_rover), ep.zd_base, ep.nf)
+
+    def _phase_variance(self, el: np.ndarray) -> np.ndarray:
+        return phase_variance(el, self.opt.phase_sigma_a_m, self.opt.phase_sigma_b_m)
+
+    def _switch_ionosphere(self, baseline_m: float) -> float:
+        """The SD ionosphere's prior sigma0 [m] this epoch; the ionosphere enters the model for a VRS or a
+        baseline long enough to need it, and then stays."""
+        opt = self.opt
+        sigma0 = ionosphere_prior.iono_sigma0(baseline_m, self.base_is_vrs, opt.iono_sigma_m, opt.vrs_iono_sigma_m)
+        if ionosphere_prior.estimate_ionosphere(opt.ionosphere, sigma0):
+            self.iono_active = True
+        self._iono_sigma_now = sigma0
+        return sigma0
+
+    def _add_states(self, ep: _CommonEpoch, ok: np.ndarray, el: np.ndarray, sigma0: float) -> None:
+        """New SD ambiguities from code (cycles) for usable observations without one, and new SD
+        ionospheres at their prior."""
+        for k, f in zip(*np.nonzero(ok)):
+            key = (ep.sats[k], int(f))
+            if self.amb_state(key) is None:
+                self._new_amb(key, self._sd_code_cycles(ep, k, f))
+        if self.iono_active:
+            mapping = ionosphere_prior.mapping(el)
+            for k in np.flatnonzero(ok.any(axis=1)):
+                if self.ion_state(ep.sats[k]) is None:
+                    self._new_ion(ep.sats[k], ionosphere_prior.prior_variance(sigma0, mapping[k]), ep.t)
+
+    def _sd_code_cycles(self, ep: _CommonEpoch, k: int, f: int) -> float:
+        """An SD ambiguity's code-derived start value [cycles]: SD phase minus SD code over the wavelength."""
+        ro, bo = ep.rover, ep.base
+        return (ro.phase_cyc[k, f] - bo.phase_cyc[k, f]) - (ro.code_m[k, f] - bo.code_m[k, f]) / ep.wl[k, f]
+
+    def _amb_variances(self, sats: list[str], ok: np.ndarray) -> np.ndarray:
+        """Variance [cycles^2] of each usable SD ambiguity (inf where there is no state)."""
+        amb_var = np.full(ok.shape, np.inf)
+        diagP = np.diag(self.P)
+        for k, f in zip(*np.nonzero(ok)):
+            i = self.amb_state((sats[k], int(f)))
+            if i is not None:
+                amb_var[k, f] = diagP[i]
+        return amb_var
+
+    def _dd_index(self, groups, sats: list[str]) -> DDIndex:
+        return dd_index(groups, lambda k, f: self.layout.index(("amb", sats[k], f)),
+                        (lambda k: self.layout.index(("ion", sats[k]))) if self.iono_active else None)
+
+    def _rows(self, ep: _CommonEpoch, dd: DDIndex, sd: SingleDifferences, var_sd: np.ndarray,
+              keep: np.ndarray | None) -> Rows:
+        """The DD rows at the SDs' linearisation point, those of `keep` only (None: all)."""
+        return dd_rows(dd, sd, ep.wl, ep.mu, var_sd, self.x, self._code_phase_ratio()).select(keep)
+
+    def _screened_rows(self, ep: _CommonEpoch, dd: DDIndex, groups, sd: SingleDifferences, x_rov: np.ndarray,
+                       var_sd: np.ndarray) -> tuple[DDIndex, Rows, np.ndarray]:
+        """Prefit screening of the DD rows against the prior state: a phase row with an established
+        ambiguity and an innovation beyond max(PHASE_INNOVATION_SIGMAS sigma, PHASE_INNOVATION_MIN_M) is a
+        slip the detectors missed (its ambiguities are restarted and the rows rebuilt); code rows beyond
+        MAX_CODE_INNOVATION_M are blunders (left out).  Returns the DD index, the rows kept and which."""
+        rows = self._rows(ep, dd, sd, var_sd, None).about(self.x[:3], x_rov)
+        S_diag = np.einsum("ij,ij->i", rows.H @ self.P, rows.H) + np.diag(rows.R)
+        m = len(dd.k)
+        known = self.P[dd.i, dd.i] < AMB_KNOWN_SIGMA_CYC**2
+        bad_ph = known & (np.abs(rows.v[:m]) > np.maximum(PHASE_INNOVATION_SIGMAS * np.sqrt(S_diag[:m]),
+                                                          PHASE_INNOVATION_MIN_M))
+        if np.any(bad_ph):
+            # a slip: re-initialise the ambiguities involved and rebuild (the reference slipping shows as
+            # most of its group's rows failing together)
+            for key in slipped_keys(bad_ph, dd, known, ep.sats):
+                self._drop_amb(key)
+                self._new_amb(key, self._sd_code_cycles(ep, ep.sats.index(key[0]), key[1]))
+            dd = self._dd_index(groups, ep.sats)
+            rows = self._rows(ep, dd, sd, var_sd, None).about(self.x[:3], x_rov)
+        keep = ~((rows.kind == 0) & (np.abs(rows.v) > MAX_CODE_INNOVATION_M))
+        return dd, rows.select(keep), keep
+
+    def _at_phase_position(self, ep: _CommonEpoch, dd: DDIndex, rows: Rows, sd: SingleDifferences,
+                           x_rov: np.ndarray, var_sd: np.ndarray, keep: np.ndarray):
+        """With established ambiguities the phases alone place the rover to millimetres: the rows
+        linearised there (a 3-unknown least squares) when that is over RELINEARISE_M from x_rov, rather
+        than after a first full update from the SPP prior.  Returns (x_rov, SDs, rows), changed or not."""
+        x_phase = self._phase_position(rows, x_rov)
+        if x_phase is None or not np.linalg.norm(x_phase - x_rov) > RELINEARISE_M:
+            return x_rov, sd, rows
+        sd = self._single_differences(ep, x_phase)
+        return x_phase, sd, self._rows(ep, dd, sd, var_sd, keep).about(self.x[:3], x_phase)
+
+    def _iterated_update(self, ep: _CommonEpoch, dd: DDIndex, rows: Rows, sd: SingleDifferences,
+                         x_rov: np.ndarray, var_sd: np.ndarray, keep: np.ndarray):
+        """The Kalman update with `rows`, redone once from the same prior linearised at the updated position
+        when that landed more than RELINEARISE_M from x_rov (a start from SPP): a few metres of height error
+        in the linearisation point would otherwise bias the height by millimetres (the tropospheric delay
+        changes ~0.3 mm per metre of height).  Returns the final linearisation point and its SDs."""
+        x_prior, P_prior = self.x.copy(), self.P.copy()
+        self._kalman_update(rows.v, rows.H, rows.R)
+        if np.linalg.norm(self.x[:3] - x_rov) > RELINEARISE_M:
+            x_rov = self.x[:3].copy()
+            self.x, self.P = x_prior, P_prior
+            sd = self._single_differences(ep, x_rov)
+            rows = self._rows(ep, dd, sd, var_sd, keep).about(x_prior[:3], x_rov)
+            self._kalman_update(rows.v, rows.H, rows.R)
+        return x_rov, sd
+
+    def _mark_observed(self, groups, sats: list[str], t: float) -> None:
+        """The ambiguities and ionospheres seen this epoch are fresh."""
+        for g in groups:
+            for k in g.sats:
+                key = (sats[k], g.slot)
+                if key in self.amb_outage:
+                    self.amb_outage[key] = 0
+                if sats[k] in self.ion_seen:
+                    self.ion_seen[sats[k]] = t
+
+    def _float_solution(self, t: float, n_sat_used: int, age: float) -> RtkSolution:
+        float_pos = self.x[:3].copy()
+        return RtkSolution(t, Status.FLOAT, float_pos, self.P[:3, :3].copy(), n_sat_used, age_s=age,
+                           baseline_m=float(np.linalg.norm(float_pos - self.base_position_m)),
+                           velocity_m_s=self.x[3:6].copy() if self.n_kin == 9 else np.full(3, np.nan),
+                           message="float")
+
+    @staticmethod
+    def _float_failure(sol: RtkSolution, spp: SppResult) -> str:
+        """Why the float solution cannot be trusted (the filter is then restarted), or ''."""
+        if not np.all(np.isfinite(sol.position_m)) or np.trace(sol.covariance_m2) > MAX_FLOAT_COVARIANCE_TRACE_M2:
+            return "filter diverged, restarted"
+        if spp.ok:
+            # The float solution must agree with the epoch's own code solution; when it does not, the
+            # filter has absorbed bad data.
+            gap = float(np.linalg.norm(sol.position_m - spp.position_m))
+            if gap > SPP_CONSISTENCY_M + 5.0 * math.sqrt(max(np.trace(spp.covariance_m2), 0.0)):
+                return f"filter {gap:.0f} m from SPP, restarted"
+        return ""
+
+    def _phase_position(self, rows: Rows, x_lin: np.ndarray) -> np.ndarray | None:
         """The rover position from the DD phases whose ambiguities are established (the row's sigma from
         the states beyond the position below LINEARISATION_SIGMA_M), by weighted least squares about
         x_lin; None when fewer than LINEARISATION_MIN_ROWS such phases or when they do not agree to
         centimetres."""
-        ph = kind == 1
+        ph = rows.kind == 1
         if np.count_nonzero(ph) < LINEARISATION_MIN_ROWS:
             return None
-        Hp = H[ph]
+        Hp = rows.H[ph]
         # the rows' uncertainty from everything but the position (DD ambiguities, DD ionosphere)
         Hn = Hp[:, self.n_kin:]
         var = np.einsum("ij,ij->i", Hn @ self.P[self.n_kin:, self.n_kin:], Hn)
@@ -738,8 +780,8 @@ class RtkFilter:
         if np.count_nonzero(use) < LINEARISATION_MIN_ROWS:
             return None
         G = Hp[use, :3]
-        y = v[ph][use] + G @ (self.x[:3] - x_lin)  # innovation at the linearisation point
-        w = 1.0 / np.diag(R)[ph][use]
+        y = rows.v[ph][use] + G @ (self.x[:3] - x_lin)  # innovation at the linearisation point
+        w = 1.0 / np.diag(rows.R)[ph][use]
         A = G.T @ (G * w[:, None])
         try:
             dx = np.linalg.solve(A, G.T @ (w * y))
@@ -760,101 +802,6 @@ class RtkFilter:
                 return p0 + v0 * dt
         return self.x[:3].copy()
 
-    def _amb_known(self, key) -> bool:
-        i = self.amb_index.get(key)
-        return i is not None and self.P[i, i] < AMB_KNOWN_SIGMA_CYC**2
-
-    def _slipped_keys(self, bad, dd: "_DD", sats):
-        """Which ambiguities to reset given failing phase rows: the row's satellite, or the group's
-        reference when at least half of its known rows fail."""
-        out = set()
-        known = self.P[dd.i, dd.i] < AMB_KNOWN_SIGMA_CYC**2
-        for g in np.unique(dd.group):
-            idx = np.flatnonzero((dd.group == g) & known)
-            if len(idx) == 0:
-                continue
-            nbad = int(np.count_nonzero(bad[idx]))
-            if nbad >= max(2, (len(idx) + 1) // 2):
-                out.add((sats[dd.ref[idx[0]]], int(dd.f[idx[0]])))
-            else:
-                out.update((sats[dd.k[r]], int(dd.f[r])) for r in idx if bad[r])
-        return out
-
-    def _groups(self, sats, sys_, ok, el, nf) -> list[_Group]:
-        # ambiguity variances per satellite and slot (inf where there is no state)
-        amb_var = np.full(ok.shape, np.inf)
-        diagP = np.diag(self.P)
-        for k, f in zip(*np.nonzero(ok)):
-            i = self.amb_index.get((sats[k], int(f)))
-            if i is not None:
-                amb_var[k, f] = diagP[i]
-        known = amb_var < AMB_KNOWN_SIGMA_CYC**2
-        groups = []
-        for s in self.opt.systems:
-            in_sys = sys_ == s
-            for f in range(nf):
-                members = np.flatnonzero(ok[:, f] & in_sys)
-                if len(members) < 2:
-                    continue
-                # reference: highest elevation among satellites with an established ambiguity if any
-                est = members[known[members, f]]
-                pool = est if len(est) else members
-                ref = int(pool[np.argmax(el[pool])])  # the first of equal elevations, as max() takes
-                groups.append(_Group([ref] + [int(k) for k in members if k != ref], f))
-        return groups
-
-    def _dd_index(self, groups, sats, nf) -> "_DD":
-        """The epoch's double differences as index arrays (one entry per non-reference satellite and slot)."""
-        ks, refs, fs, gs = [], [], [], []
-        for gi, g in enumerate(groups):
-            n = len(g.sats) - 1
-            ks.extend(g.sats[1:])
-            refs.extend([g.sats[0]] * n)
-            fs.extend([g.slot] * n)
-            gs.extend([gi] * n)
-        k = np.array(ks, dtype=int)
-        ref = np.array(refs, dtype=int)
-        f = np.array(fs, dtype=int)
-        amb = np.array([self.amb_index[(sats[a], b)] for a, b in zip(ks, fs)], dtype=int)
-        amb_ref = np.array([self.amb_index[(sats[a], b)] for a, b in zip(refs, fs)], dtype=int)
-        if self.iono_active:
-            ion = np.array([self.ion_index[sats[a]] for a in ks], dtype=int)
-            ion_ref = np.array([self.ion_index[sats[a]] for a in refs], dtype=int)
-        else:
-            ion = ion_ref = None
-        return _DD(k, ref, f, np.array(gs, dtype=int), amb, amb_ref, ion, ion_ref)
-
-    def _build_rows(self, dd: "_DD", sd_phase, sd_code, los, wl, mu, var_sd):
-        """Innovations, design matrix and covariance of the epoch's DD phase rows then DD code rows.
-
-        The SD ranges were computed at x_rov = self.x[:3], so the linearisation point is the current
-        state and the innovations need no position term."""
-        nx = len(self.x)
-        m = len(dd.k)
-        ar = np.arange(m)
-        k, ref, f = dd.k, dd.ref, dd.f
-        geo = -(los[k] - los[ref])
-        H = np.zeros((2 * m, nx))
-        H[:m, :3] = geo
-        H[m:, :3] = geo
-        H[ar, dd.i] = wl[k, f]
-        H[ar, dd.iref] = -wl[ref, f]
-        if dd.ion is not None:
-            # phase advance -mu I, code delay +mu I (SD ionosphere on the first frequency per satellite)
-            H[ar, dd.ion] = -mu[k, f]
-            H[ar, dd.ion_ref] = mu[ref, f]
-            H[m + ar, dd.ion] = mu[k, f]
-            H[m + ar, dd.ion_ref] = -mu[ref, f]
-        y = np.concatenate((sd_phase[k, f] - sd_phase[ref, f], sd_code[k, f] - sd_code[ref, f]))
-        v = y - H[:, 3:] @ self.x[3:]
-        same = dd.group[:, None] == dd.group[None, :]
-        Rp = np.diag(var_sd[k, f]) + same * var_sd[ref, f][:, None]
-        R = np.zeros((2 * m, 2 * m))
-        R[:m, :m] = Rp
-        R[m:, m:] = Rp * self._code_phase_ratio() ** 2
-        kind = np.concatenate((np.ones(m, dtype=int), np.zeros(m, dtype=int)))
-        return v, H, R, kind
-
     def _code_phase_ratio(self) -> float:
         if self.opt.code_phase_ratio is not None:
             return float(self.opt.code_phase_ratio)
@@ -871,7 +818,11 @@ class RtkFilter:
         self.P = self.P - K @ PHt.T
         self.P = 0.5 * (self.P + self.P.T)
 
-    def _resolve(self, sol: RtkSolution, dd: "_DD", sats, sd_phase, los, wl, mu, x_lin, el) -> None:
+    # -----------------------------------------------------------------------------------------
+    # integer ambiguity resolution
+
+    def _resolve(self, sol: RtkSolution, dd: DDIndex, ep: _CommonEpoch, sd: SingleDifferences,
+                 x_lin: np.ndarray) -> None:
         """Integer ambiguity resolution on this epoch's DD ambiguities; on success `sol` becomes FIX.
 
         A fixed solution must leave DD phase residuals at the noise level.  When it does not, one
@@ -879,157 +830,120 @@ class RtkFilter:
         is left out and the search repeated, up to AR_EXCLUSION_RETRIES times.  When no subset passes
         at all: without the ionosphere in the model the satellite fitting the float worst is left out;
         with it (float residuals then say little, the ionosphere states absorb them) the lowest
-        satellite is, as its ionosphere prior is the loosest (partial resolution by elevation).
+        satellite is, as its ionosphere prior is the loosest and its multipath the largest (partial
+        resolution by elevation).
 
-        With the ionosphere in the model a fix is declared only after CONFIRM_EPOCHS_WITH_IONOSPHERE
-        consecutive epochs of agreeing integer decisions (`_confirm`).  A validated partial fix (ratio,
-        success rate and phase residuals passed, but too few combinations fixed to pin the position to
-        MAX_FIXED_POSITION_SIGMA_M: typically the wide-lane-like combinations first) is such a decision
-        too, and counts towards the streak; the fix declared is always a complete one.
+        With the ionosphere in the model a fix is declared only after consecutive epochs of agreeing
+        integer decisions (`_confirm`).  A validated partial fix (ratio, success rate and phase residuals
+        passed, but too few combinations fixed to pin the position to MAX_FIXED_POSITION_SIGMA_M:
+        typically the wide-lane-like combinations first) is such a decision too, and counts towards the
+        streak; the fix declared is always a complete one.
         """
-        opt = self.opt
         rows = np.arange(len(dd.k))
         n_all = len(rows)
         message = ""
-        partial = None  # this epoch's first validated partial fix: (fix, Hc, x_fix, P_fix, rows)
+        partial: tuple[_FixAttempt, np.ndarray] | None = None  # this epoch's first validated partial fix
         for _attempt in range(AR_EXCLUSION_RETRIES + 1):
-            if len(rows) < opt.min_fix_ambiguities:
+            if len(rows) < self.opt.min_fix_ambiguities:
                 message = message or "float: too few ambiguities to fix"
                 break
-            result = self._try_fix(dd, rows, sd_phase, los, wl, mu, x_lin)
+            result = self._try_fix(dd, rows, ep, sd, x_lin)
             if isinstance(result, str):
                 message = result
-                if self.iono_active:
-                    if not result.startswith("float: no ambiguity subset"):
-                        break
-                    # partial resolution by elevation: the lowest satellite has the loosest ionosphere
-                    # and the most multipath; leave it (every slot) out and search again
-                    low = dd.k[rows][np.argmin(el[dd.k[rows]])]
-                    rows = rows[dd.k[rows] != low]
-                    continue
-                if not result.startswith("float: no ambiguity subset"):
+                if result != NO_SUBSET_MESSAGE:
                     break
-                # nothing passed: the satellite fitting the float solution worst is the likely
-                # culprit (multipath, an undetected slip); leave it out and search again
-                res = self._phase_residuals(dd, rows, sd_phase, los, wl, mu, x_lin, self.x)
-                rows = np.delete(rows, int(np.argmax(np.abs(res))))
+                if self.iono_active:
+                    rows = _without_lowest(dd, rows, sd.el)
+                else:
+                    # the satellite fitting the float solution worst is the likely culprit (multipath, an
+                    # undetected slip)
+                    res = phase_residuals(dd, rows, sd, ep.wl, ep.mu, x_lin, self.x)
+                    rows = np.delete(rows, int(np.argmax(np.abs(res))))
                 continue
-            fix, Hc, x_fix, P_fix, res, sigma = result
-            worst = int(np.argmax(np.abs(res)))
-            if sigma > MAX_FIXED_POSITION_SIGMA_M:
+            worst = int(np.argmax(np.abs(result.residuals)))
+            residual_ok = abs(result.residuals[worst]) <= MAX_FIXED_PHASE_RESIDUAL_M
+            if result.sigma_m > MAX_FIXED_POSITION_SIGMA_M:
                 # A partial fix of a few combinations (wide-lane-like) can pass its tests and still leave
                 # the position at float precision: that is not an RTK fix and is not reported as one,
                 # but its integers are a decision the next epochs' fixes must agree with.
-                message = f"float: fixed subset ({fix.count}) leaves position sigma {sigma * 100:.0f} cm"
-                if partial is None and abs(res[worst]) <= MAX_FIXED_PHASE_RESIDUAL_M:
-                    partial = (fix, Hc, x_fix, P_fix, rows)
+                message = f"float: fixed subset ({result.fix.count}) leaves position sigma {result.sigma_m * 100:.0f} cm"
+                if partial is None and residual_ok:
+                    partial = (result, rows)
                 if not self.iono_active:
                     break
-                low = dd.k[rows][np.argmin(el[dd.k[rows]])]
-                rows = rows[dd.k[rows] != low]
+                rows = _without_lowest(dd, rows, sd.el)
                 continue
-            if abs(res[worst]) <= MAX_FIXED_PHASE_RESIDUAL_M:
-                count = self._confirm(dd, sats, rows, fix, Hc, x_fix, P_fix)
-                need = self._confirm_needed()
-                if count >= need:
-                    self._accept_fix(sol, fix, Hc, x_fix, P_fix, n_all)
-                    sol.fixed_dd = self._fixed_dd(dd, sats, rows, x_fix, P_fix)
-                else:
-                    self.consecutive_fixes = 0
-                    sol.message = f"float: fix candidate {count}/{need} ({fix.count}/{n_all} ambiguities, ratio {fix.ratio:.1f})"
+            if residual_ok:
+                self._declare_or_confirm(sol, dd, ep, rows, result, n_all)
                 return
-            message = f"float: fixed solution rejected (phase residual {abs(res[worst]) * 100:.1f} cm)"
+            message = f"float: fixed solution rejected (phase residual {abs(result.residuals[worst]) * 100:.1f} cm)"
             # leave the worst satellite out (its reference too if every row of the group is bad)
             rows = np.delete(rows, worst)
         self.consecutive_fixes = 0
         if partial is not None and self._confirm_needed() > 1:
-            fix, Hc, x_fix, P_fix, prows = partial
-            count = self._confirm(dd, sats, prows, fix, Hc, x_fix, P_fix)
-            message = f"{message}; {fix.count} combinations fixed, agreeing over {count} epochs"
+            attempt, prows = partial
+            count = self._confirm(dd, prows, attempt)
+            message = f"{message}; {attempt.fix.count} combinations fixed, agreeing over {count} epochs"
         else:
-            self._confirm_reset()
+            self.confirmation.reset()
         sol.message = message
 
+    def _declare_or_confirm(self, sol: RtkSolution, dd: DDIndex, ep: _CommonEpoch, rows: np.ndarray,
+                            attempt: _FixAttempt, n_all: int) -> None:
+        """A validated complete fix: declared when its decision has agreed long enough, else a candidate."""
+        count = self._confirm(dd, rows, attempt)
+        need = self._confirm_needed()
+        if count >= need:
+            self._accept_fix(sol, attempt, n_all)
+            keys = [(ep.sats[dd.k[r]], ep.sats[dd.ref[r]], int(dd.f[r])) for r in rows]
+            sol.fixed_dd = FixedIntegers.determined(keys, attempt.x, attempt.P, dd.i[rows], dd.iref[rows])
+        else:
+            self.consecutive_fixes = 0
+            fix = attempt.fix
+            sol.message = f"float: fix candidate {count}/{need} ({fix.count}/{n_all} ambiguities, ratio {fix.ratio:.1f})"
+
     def _confirm_needed(self) -> int:
+        """Consecutive agreeing decisions a fix needs: the setting, else 1 for a short baseline (the model is
+        exact to millimetres) and CONFIRM_EPOCHS_WITH_IONOSPHERE with residual atmosphere in the model."""
         if self.opt.confirm_epochs is not None:
             return max(1, int(self.opt.confirm_epochs))
-        # short baselines: the model is exact to millimetres and a validated fix is declared at once;
-        # with residual atmosphere in the model (VRS, medium range) a fix is confirmed over epochs
         return CONFIRM_EPOCHS_WITH_IONOSPHERE if self.iono_active else 1
 
-    def _confirm_reset(self) -> None:
-        self._candidate = None
-        self._candidate_count = 0
-
-    def _confirm(self, dd: "_DD", sats, rows, fix, Hc, x_fix, P_fix) -> int:
-        """Count consecutive epochs whose validated (complete or partial) fixes agree, this one included.
-
-        An epoch's integer decision is kept as integer functionals of the single-difference ambiguity
-        states, by satellite and slot: each DD ambiguity its fix determines (conditional sigma below
-        CONFIRM_SIGMA_CYC), and the fixed decorrelated combinations themselves (what a partial fix
-        determines).  The next epoch agrees when every such functional it can evaluate (its satellites
-        still tracked without a slip) and determines has the same integer, and there are at least
-        min_fix_ambiguities of them.  An ambiguity re-initialised since (a slip: a new arc under the same
-        key) is, like a satellite that has risen since, not comparable: its functionals are left out, and
-        the new integer is validated by this epoch's tests alone, against the others' agreement."""
+    def _confirm(self, dd: DDIndex, rows: np.ndarray, attempt: _FixAttempt) -> int:
+        """The length of the streak of agreeing decisions this validated (complete or partial) fix ends."""
         if self._confirm_needed() <= 1:
             return 1  # declared at once: nothing to compare with
-        prev = self._candidate
-        agree = False
-        if prev is not None:
-            keys, C, z = prev
-            idx = np.array([self.amb_index[k] if self.amb_serial.get(k) == serial else -1 for k, serial in keys],
-                           dtype=int)
-            usable = ~np.any((C != 0.0) & (idx < 0)[None, :], axis=1)
-            if np.count_nonzero(usable) >= self.opt.min_fix_ambiguities:
-                present = idx >= 0
-                Cu = C[np.ix_(usable, present)]
-                ip = idx[present]
-                val = Cu @ x_fix[ip]
-                var = np.einsum("ij,jk,ik->i", Cu, P_fix[np.ix_(ip, ip)], Cu)
-                det = var < CONFIRM_SIGMA_CYC**2
-                agree = (np.count_nonzero(det) >= self.opt.min_fix_ambiguities
-                         and bool(np.all(np.abs(val[det] - z[usable][det]) < 0.5)))
-        self._candidate_count = self._candidate_count + 1 if agree else 1
-        self._candidate = self._decision(dd, sats, rows, Hc, fix.z_fixed, x_fix, P_fix)
-        return self._candidate_count
+        key_of = {i: key for key, i in self.layout.items()}
 
-    def _decision(self, dd: "_DD", sats, rows, Hc, z_fixed, x_fix, P_fix):
-        """((SD ambiguity key, serial) per column, integer functionals over them (one per row), their
-        integers) of a fix: the DD ambiguities it determines, then its fixed combinations."""
-        inv = {i: key for key, i in self.amb_index.items()}
-        cols = np.flatnonzero(np.any(Hc != 0.0, axis=0))
-        keys = [(inv[int(c)], self.amb_serial[inv[int(c)]]) for c in cols]
-        pos = {int(c): j for j, c in enumerate(cols)}
-        i, iref = dd.i[rows], dd.iref[rows]
-        var = P_fix[i, i] + P_fix[iref, iref] - 2.0 * P_fix[i, iref]
-        det = np.flatnonzero(var < CONFIRM_SIGMA_CYC**2)
-        C_dd = np.zeros((len(det), len(cols)))
-        C_dd[np.arange(len(det)), [pos[int(c)] for c in i[det]]] = 1.0
-        C_dd[np.arange(len(det)), [pos[int(c)] for c in iref[det]]] = -1.0
-        z_dd = np.round(x_fix[i[det]] - x_fix[iref[det]])
-        C = np.vstack((C_dd, Hc[:, cols]))
-        z = np.concatenate((z_dd, np.asarray(z_fixed, dtype=float)))
-        return keys, C, z
+        def identity(i: int):  # an SD ambiguity state's (satellite, slot) and arc serial
+            key = key_of[i][1:]
+            return key, self.amb_serial[key]
 
-    def _try_fix(self, dd: "_DD", rows, sd_phase, los, wl, mu, x_lin):
-        opt = self.opt
+        def index_of(ident) -> int:
+            key, serial = ident
+            return self.amb_state(key) if self.amb_serial.get(key) == serial else -1
+
+        decision = IntegerDecision.from_fix(identity, dd.i[rows], dd.iref[rows], attempt.Hc, attempt.fix.z_fixed,
+                                            attempt.x, attempt.P)
+        return self.confirmation.observe(decision, index_of, attempt.x, attempt.P)
+
+    def _try_fix(self, dd: DDIndex, rows: np.ndarray, ep: _CommonEpoch, sd: SingleDifferences,
+                 x_lin: np.ndarray) -> _FixAttempt | str:
+        """A partial fix of the DD ambiguities of `rows` and the state conditioned on it, or why not."""
         i, iref = dd.i[rows], dd.iref[rows]
         idx = np.unique(np.concatenate((i, iref)))
-        pos = np.searchsorted(idx, i)
-        pos_ref = np.searchsorted(idx, iref)
         n = len(rows)
-        D = np.zeros((n, len(idx)))
-        D[np.arange(n), pos] = 1.0
-        D[np.arange(n), pos_ref] = -1.0
+        D = np.zeros((n, len(idx)))  # SD -> DD
+        D[np.arange(n), np.searchsorted(idx, i)] = 1.0
+        D[np.arange(n), np.searchsorted(idx, iref)] = -1.0
         a_dd = D @ self.x[idx]
         Q_dd = D @ self.P[np.ix_(idx, idx)] @ D.T
         try:
-            fix = bounded_partial_fix(a_dd, Q_dd, opt.min_success_rate, opt.ratio_threshold, opt.min_fix_ambiguities)
+            fix = partial_fix(a_dd, Q_dd, fix_policy(self.opt))
         except AmbiguityError as exc:
             return f"float: ambiguity covariance unusable ({exc})"
         if fix is None:
-            return "float: no ambiguity subset passed ratio and success-rate tests"
+            return NO_SUBSET_MESSAGE
         # the constraint Zs^T D a_sd = z on the full state (conditional mean and covariance)
         Hc = np.zeros((fix.count, len(self.x)))
         Hc[:, idx] = fix.Zs.T @ D
@@ -1043,27 +957,10 @@ class RtkFilter:
         P_fix = self.P - K @ PHt.T
         # the 3-D position sigma of the fixed solution (a partial fix may leave it at float precision)
         sigma = math.sqrt(max(float(np.trace(P_fix[:3, :3])), 0.0))
-        return fix, Hc, x_fix, P_fix, self._phase_residuals(dd, rows, sd_phase, los, wl, mu, x_lin, x_fix), sigma
+        return _FixAttempt(fix, Hc, x_fix, P_fix, phase_residuals(dd, rows, sd, ep.wl, ep.mu, x_lin, x_fix), sigma)
 
-    @staticmethod
-    def _phase_residuals(dd: "_DD", rows, sd_phase, los, wl, mu, x_lin, x) -> np.ndarray:
-        """DD phase residuals [m] of a state x, the rows' SD phases formed at the linearisation point."""
-        dx = x[:3] - x_lin
-        k, ref, f = dd.k[rows], dd.ref[rows], dd.f[rows]
-        y = sd_phase[k, f] - sd_phase[ref, f]
-        pred = -(los[k] - los[ref]) @ dx + wl[k, f] * x[dd.i[rows]] - wl[ref, f] * x[dd.iref[rows]]
-        if dd.ion is not None:
-            pred = pred - mu[k, f] * x[dd.ion[rows]] + mu[ref, f] * x[dd.ion_ref[rows]]
-        return y - pred
-
-    def _fixed_dd(self, dd: "_DD", sats, rows, x_fix, P_fix) -> dict[tuple[str, str, int], int]:
-        i, iref = dd.i[rows], dd.iref[rows]
-        var = P_fix[i, i] + P_fix[iref, iref] - 2.0 * P_fix[i, iref]
-        val = x_fix[i] - x_fix[iref]
-        return {(sats[dd.k[r]], sats[dd.ref[r]], int(dd.f[r])): int(round(a))
-                for r, a, v in zip(rows, val, var) if v < CONFIRM_SIGMA_CYC**2}
-
-    def _accept_fix(self, sol, fix, Hc, x_fix, P_fix, n_all) -> None:
+    def _accept_fix(self, sol: RtkSolution, attempt: _FixAttempt, n_all: int) -> None:
+        fix, x_fix, P_fix = attempt.fix, attempt.x, attempt.P
         sol.status = Status.FIX
         sol.position_m = x_fix[:3].copy()
         sol.covariance_m2 = 0.5 * (P_fix[:3, :3] + P_fix[:3, :3].T)
@@ -1075,109 +972,12 @@ class RtkFilter:
             sol.velocity_m_s = x_fix[3:6].copy()
         self.consecutive_fixes += 1
         if self.opt.fix_and_hold and self.consecutive_fixes >= HOLD_AFTER_FIXES:
-            v = fix.z_fixed - Hc @ self.x
-            self._kalman_update(v, Hc, np.eye(fix.count) * HOLD_VARIANCE_CYC2)
-
-    def _float_or_single(self, t, spp, age, n, msg) -> RtkSolution:
-        return self._single(t, spp, msg, age)
+            v = fix.z_fixed - attempt.Hc @ self.x
+            self._kalman_update(v, attempt.Hc, np.eye(fix.count) * HOLD_VARIANCE_CYC2)
 
 
-def bounded_partial_fix(a_hat: np.ndarray, Q: np.ndarray, min_success_rate: float, ratio_threshold: float,
-                        min_count: int, max_tries: int = MAX_PARTIAL_FIX_TRIES) -> PartialFix | None:
-    """Partial ambiguity resolution with a bounded cost (the policy of `augnet.gnss.ambiguity.partial_fix`,
-    built from its LAMBDA pieces): in the decorrelated L^T D L ordering, take the largest trailing block
-    whose bootstrapped success rate reaches `min_success_rate`, search it, and accept it if the ratio
-    test passes; otherwise drop the worst-determined leading ambiguity and retry, at most `max_tries`
-    searches.  The full set is searched first when it qualifies.
-    """
-    n = a_hat.shape[0]
-    if n < max(min_count, 1):
-        return None
-    Q = 0.5 * (Q + Q.T)
-    L, D = ldl_lapack(Q)
-    L, D, Z = reduce(L, D)
-    zs = Z.T @ a_hat
-    # success rates of every trailing block at once: products of the per-ambiguity factors
-    # 2 Phi(1 / (2 sqrt(d))) - 1 (`augnet.gnss.ambiguity.bootstrap_success_rate` of one ambiguity)
-    factors = np.array([2.0 * (0.5 * (1.0 + math.erf(1.0 / (2.0 * math.sqrt(d)) / math.sqrt(2.0)))) - 1.0 for d in D])
-    tail = np.cumprod(factors[::-1])[::-1]
-    starts = [k for k in range(0, n - min_count + 1) if tail[k] >= min_success_rate]
-    for start in starts[:max_tries]:
-        # A float solution biased by unmodelled errors (ionosphere on a long baseline, multipath) is
-        # far from every integer: its bootstrapped norm fails a chi-square test, and the search,
-        # whose ellipsoid that norm sizes, would only burn seconds to fail the ratio test anyway.
-        q_boot, rms_frac = _bootstrapped_norm(L[start:, start:], D[start:], zs[start:])
-        # Both tests, because after fix-and-hold the covariance is far below the true (time-correlated)
-        # error and the chi-square test alone would refuse floats that sit a few hundredths of a cycle
-        # from their integers.
-        if q_boot > chi2_quantile(n - start, FLOAT_CONSISTENCY_FALSE_ALARM) and rms_frac > BIASED_FLOAT_RMS_CYC:
-            continue
-        cand, norms = search(L[start:, start:], D[start:], zs[start:], 2)
-        ratio = float(norms[1] / norms[0]) if norms[0] > 0 else math.inf
-        if ratio >= ratio_threshold:
-            return PartialFix(Zs=Z[:, start:], z_fixed=cand[0], ratio=ratio, success_rate=float(tail[start]))
-    return None
-
-
-def ldl_lapack(Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """`augnet.gnss.ambiguity.ldl` (Q = L^T diag(D) L, L unit lower triangular, factored from the last
-    index) through LAPACK's Cholesky: with J the order reversal, J Q J = C C^T gives Q = U U^T for the
-    upper triangular U = J C J, so D = diag(U)^2 and L = diag(U)^-1 U^T.  Equal to rounding, and
-    two orders of magnitude faster than the rank-one downdates for 30-80 ambiguities."""
-    Q = np.asarray(Q, dtype=float)
-    if Q.ndim != 2 or Q.shape[0] != Q.shape[1]:
-        raise AmbiguityError(f"covariance must be square, got {Q.shape}")
-    if not np.all(np.isfinite(Q)):
-        raise AmbiguityError("covariance is not positive definite")
-    try:
-        C = np.linalg.cholesky(Q[::-1, ::-1])
-    except np.linalg.LinAlgError:
-        raise AmbiguityError("covariance is not positive definite") from None
-    U = C[::-1, ::-1]
-    u = np.diag(U).copy()
-    return U.T / u[:, None], u * u
-
-
-@njit(cache=True)
-def _bootstrapped_norm(L: np.ndarray, D: np.ndarray, zs: np.ndarray):
-    """(squared distance, RMS conditional fraction [cycles]) of the integer bootstrapping (sequential
-    conditional rounding) solution from the float ambiguities, in the metric of their covariance
-    L^T diag(D) L (last index first)."""
-    n = len(D)
-    z = np.zeros(n)
-    zb = np.zeros(n)
-    dist = 0.0
-    for k in range(n - 1, -1, -1):
-        acc = 0.0
-        for j in range(k + 1, n):
-            acc += (z[j] - zb[j]) * L[j, k]
-        zb[k] = zs[k] + acc
-        z[k] = np.round(zb[k])
-        dist += (zb[k] - z[k]) ** 2 / D[k]
-    return dist, np.sqrt(np.mean((zb - z) ** 2))
-
-
-def _take(sp: SatPositions, idx) -> SatPositions:
-    """The satellite states of a subset of an epoch's satellites."""
-    return SatPositions(*(a[idx] for a in sp))
-
-
-_BLAS_CONTROLLER: ThreadpoolController | None = None
-
-
-def _blas_controller() -> ThreadpoolController:
-    global _BLAS_CONTROLLER
-    if _BLAS_CONTROLLER is None:
-        _BLAS_CONTROLLER = ThreadpoolController()
-    return _BLAS_CONTROLLER
-
-
-def _block_diag(blocks: list[np.ndarray]) -> np.ndarray:
-    n = sum(b.shape[0] for b in blocks)
-    R = np.zeros((n, n))
-    i = 0
-    for b in blocks:
-        m = b.shape[0]
-        R[i:i + m, i:i + m] = b
-        i += m
-    return R
+def _without_lowest(dd: DDIndex, rows: np.ndarray, el: np.ndarray) -> np.ndarray:
+    """`rows` without every row (each slot) of their lowest satellite: partial resolution by elevation,
+    the lowest satellite having the loosest ionosphere and the most multipath."""
+    low = dd.k[rows][np.argmin(el[dd.k[rows]])]
+    return rows[dd.k[rows] != low]

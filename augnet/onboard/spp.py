@@ -13,7 +13,6 @@ Bad input never raises: `solve_spp` returns a result with `ok=False` and a messa
 
 from __future__ import annotations
 
-import functools
 import math
 import weakref
 from dataclasses import dataclass, field
@@ -24,6 +23,7 @@ import numpy as np
 from augnet.gnss.constants import OMEGA_E_GPS_RAD_S, SPEED_OF_LIGHT_M_S, WGS84_A_M, WGS84_E2
 from augnet.gnss.ephemeris import NavigationData, group_delay_s, satellite_state
 from augnet.gnss.signals import FREQ_L1_HZ
+from augnet.gnss.statistics import chi2_quantile
 from augnet.onboard.atmosphere import klobuchar_l1_m, saastamoinen_m
 from augnet.onboard.observations import BAND_FREQ_HZ, EpochObs
 
@@ -47,28 +47,6 @@ MAX_PLAUSIBLE_HEIGHT_M = 1.0e5
 MIN_PLAUSIBLE_HEIGHT_M = -1.0e3
 # Residuals beyond this [m] after convergence mean a blunder (wrong ephemeris, corrupt code).
 GROSS_RESIDUAL_M = 1.0e3
-
-
-@functools.lru_cache(maxsize=1024)
-def chi2_quantile(dof: int, p_false_alarm: float = RAIM_FALSE_ALARM) -> float:
-    """Upper quantile of the chi-square distribution (Wilson-Hilferty approximation, good to ~1%)."""
-    if dof <= 0:
-        return math.inf
-    z = _normal_quantile(1.0 - p_false_alarm)
-    a = 2.0 / (9.0 * dof)
-    return dof * (1.0 - a + z * math.sqrt(a)) ** 3
-
-
-def _normal_quantile(p: float) -> float:
-    # Acklam's rational approximation is overkill here; bisection on erf is exact enough and short.
-    lo, hi = -10.0, 10.0
-    for _ in range(80):
-        mid = 0.5 * (lo + hi)
-        if 0.5 * (1.0 + math.erf(mid / math.sqrt(2.0))) < p:
-            lo = mid
-        else:
-            hi = mid
-    return 0.5 * (lo + hi)
 
 
 class SatPositions(NamedTuple):
@@ -298,7 +276,7 @@ def _solve(obs: EpochObs, nav: NavigationData, opt: SppOptions, initial_m, sp_gi
         if not res.ok or not opt.raim:
             break
         dof = res.n_used - 3 - len(res.clocks_m)
-        if dof <= 0 or res.chi2 <= chi2_quantile(dof):
+        if dof <= 0 or res.chi2 <= chi2_quantile(dof, RAIM_FALSE_ALARM):
             break
         # exclusion: try each used satellite, keep the best passing solution
         best = None
@@ -308,8 +286,8 @@ def _solve(obs: EpochObs, nav: NavigationData, opt: SppOptions, initial_m, sp_gi
             r = _iterate(obs, sp, pr, tgd, iono_scale, usable & ~m, sys_, res.position_m, opt, alpha, beta, steps)
             if r.ok:
                 d = r.n_used - 3 - len(r.clocks_m)
-                if d > 0 and (best is None or r.chi2 / chi2_quantile(d) < best[1]):
-                    best = (j, r.chi2 / chi2_quantile(d), r)
+                if d > 0 and (best is None or r.chi2 / chi2_quantile(d, RAIM_FALSE_ALARM) < best[1]):
+                    best = (j, r.chi2 / chi2_quantile(d, RAIM_FALSE_ALARM), r)
         if best is None:
             res.message = "RAIM: residual test failed, no exclusion possible"
             break

@@ -8,7 +8,7 @@ instead (seeded: the same scenario gives the same delays). A VRS epoch tagged t 
 and the train solves epoch t at t with the newest VRS epoch that has arrived by then (low-latency RTK,
 what a train needs: it cannot wait for the base), so the correction age is normally 1 s at 1 Hz and
 2 s or more when the cellular downlink is slow. The filter refuses corrections older than
-`augnet.onboard.rtk.DEFAULT_MAX_AGE_S` (5 s). Source of the scale: ../shared/design/network-rtk.md,
+`augnet.onboard.rtk.RtkOptions.max_age_s` (5 s). Source of the scale: ../shared/design/network-rtk.md,
 "corrections normally arrive under 2 s old and must stay under 5 s"; the split between the links
 and the shape of the downlink distribution are this model's assumptions (a station's NTRIP upload
 over fibre or a leased line, a caster in the same centre, a cellular downlink with a long tail).

@@ -153,3 +153,105 @@ def test_compiled_kernels_agree_with_the_reference_python(seed, n):
     c2, s2 = am.search_reference(L1, D1, zs, 3)
     np.testing.assert_array_equal(c1, c2)
     np.testing.assert_allclose(s1, s2, rtol=1e-12)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 30))
+def test_lapack_ldl_equals_the_reference_factorisation(seed, n):
+    from augnet.gnss.ambiguity import ldl_reference
+
+    Q = random_covariance(np.random.default_rng(seed), n)
+    L1, D1 = ldl(Q)
+    L2, D2 = ldl_reference(Q)
+    np.testing.assert_allclose(D1, D2, rtol=1e-9)
+    np.testing.assert_allclose(L1, L2, rtol=1e-7, atol=1e-9)
+    assert np.array_equal(np.diag(L1), np.ones(n))
+
+
+def test_both_factorisations_refuse_what_is_not_positive_definite():
+    from augnet.gnss.ambiguity import ldl_reference
+
+    for bad in (np.array([[1.0, 2.0], [2.0, 1.0]]), np.array([[np.nan, 0.0], [0.0, 1.0]]), np.zeros((2, 3))):
+        for factor in (ldl, ldl_reference):
+            with pytest.raises(AmbiguityError):
+                factor(bad)
+
+
+def test_the_old_positional_call_is_the_policy_it_names():
+    from augnet.gnss.ambiguity import FixPolicy
+
+    rng = np.random.default_rng(11)
+    Q = random_covariance(rng, 8, max_cond=1e3) * 1e-2
+    a_hat = rng.integers(-50, 50, size=8) + rng.normal(scale=0.05, size=8)
+    old = partial_fix(a_hat, Q, 0.99, 2.0, 5)
+    new = partial_fix(a_hat, Q, FixPolicy(min_success_rate=0.99, ratio_threshold=2.0, min_count=5))
+    assert old is not None and new is not None
+    np.testing.assert_array_equal(old.Zs, new.Zs)
+    np.testing.assert_array_equal(old.z_fixed, new.z_fixed)
+    assert (old.ratio, old.success_rate) == (new.ratio, new.success_rate)
+    with pytest.raises(TypeError):
+        partial_fix(a_hat, Q, FixPolicy(), 3.0)
+
+
+def test_bounded_tries_and_biased_float_screening():
+    from augnet.gnss.ambiguity import FixPolicy
+
+    rng = np.random.default_rng(5)
+    n = 8
+    Q = np.diag(np.full(n, 0.02**2))
+    truth = rng.integers(-100, 100, size=n).astype(float)
+    # a float half a cycle from every integer: biased, and the ratio test cannot pass
+    biased = truth + 0.5
+    assert partial_fix(biased, Q, FixPolicy(biased_float_false_alarm=1e-6)) is None
+    # a good float passes with or without screening, in the first try
+    good = truth + rng.normal(scale=0.02, size=n)
+    fix = partial_fix(good, Q, FixPolicy(max_tries=1, biased_float_false_alarm=1e-6))
+    assert fix is not None and fix.count == n
+    np.testing.assert_array_equal(fix.z_fixed, fix.Zs.T @ truth)
+    # no try allowed: nothing is searched
+    assert partial_fix(good, Q, FixPolicy(max_tries=0)) is None
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 20))
+def test_compiled_bootstrapped_norm_agrees_with_the_reference(seed, n):
+    from augnet.gnss import ambiguity as am
+
+    if am._kernels is None:
+        pytest.skip("numba not installed: the reference Python is in use")
+    rng = np.random.default_rng(seed)
+    L, D = ldl(random_covariance(rng, n))
+    zs = rng.normal(scale=10, size=n)
+    d1, r1 = am.bootstrapped_norm(L, D, zs)
+    d2, r2 = am.bootstrapped_norm_reference(L, D, zs)
+    assert d1 == pytest.approx(d2, rel=1e-12)
+    assert r1 == pytest.approx(r2, rel=1e-12)
+
+
+def test_fixed_integers_is_a_read_only_mapping_that_rereferences():
+    from augnet.gnss.ambiguity import FixedIntegers
+
+    z = FixedIntegers({("G05", "G10", 0): 7, ("G12", "G10", 0): -3, ("G05", "G10", 1): 2})
+    assert z == {("G05", "G10", 0): 7, ("G12", "G10", 0): -3, ("G05", "G10", 1): 2}
+    assert len(z) == 3 and z[("G12", "G10", 0)] == -3
+    assert z.dd("G10", "G05", 0) == -7  # swapped
+    assert z.dd("G05", "G12", 0) == 10  # through the common reference G10
+    assert z.dd("G12", "G05", 1) is None  # slot 1 knows nothing of G12
+    assert z.dd("G05", "G05", 0) == 0
+    other = FixedIntegers({("G05", "G12", 0): 10, ("E01", "E02", 0): 4})
+    assert z.agrees_with(other)
+    assert not z.agrees_with({("G05", "G12", 0): 9})
+    with pytest.raises(TypeError):
+        z[("G05", "G10", 0)] = 8
+    assert FixedIntegers() == {}
+
+
+def test_fixed_integers_keeps_only_what_the_covariance_determines():
+    from augnet.gnss.ambiguity import DETERMINED_SIGMA_CYC, FixedIntegers
+
+    x = np.array([0.0, 12.02, 5.0, 3.49])
+    P = np.diag([1.0, 1e-4, 1e-4, 1.0])
+    keys = [("G01", "G02", 0), ("G03", "G02", 0)]
+    z = FixedIntegers.determined(keys, x, P, np.array([1, 3]), np.array([2, 2]))
+    assert dict(z) == {("G01", "G02", 0): 7}  # G03's sigma is a cycle: not determined
+    assert DETERMINED_SIGMA_CYC == 0.05

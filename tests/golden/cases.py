@@ -3,7 +3,7 @@
 A case returns {"epochs": [record, ...], "meta": {...}}; a record is a flat dict of JSON values (the epoch's
 time under "t"). Bytes are pinned as sha256 (first 16 hex digits) and length; integers and strings exactly;
 metre values as integers of 0.1 mm (`tenth_mm`), compared within `compare.TOLERANCE_TENTH_MM`.
-Nothing here reads a clock: every input is a seeded simulation or a recorded file.
+No input depends on a clock: each is a seeded simulation or a recorded file, fed epoch by epoch.
 """
 
 from __future__ import annotations
@@ -22,15 +22,23 @@ from tests.golden import probes
 # minute, test_network_sim.py), and VRS sessions at these offsets from the check receiver [m, ECEF].
 CENTRE_SIM_S = 150
 VRS_OFFSETS_M = {"at-check1": (15.0, -20.0, 5.0), "east-9km": (5000.0, 7000.0, -3000.0),
-                 "near-west": (-20000.0, 9000.0, -8000.0)}
+                 "west-23km": (-20000.0, 9000.0, -8000.0)}
 ONBOARD_VRS_SESSION = "at-check1"
+# epoch -> session changes on the way: (what, session, new offset from check1 [m, ECEF])
+SESSION_EVENTS = {60: (("move", "east-9km", (7000.0, 4000.0, -2000.0)),),
+                  90: (("open", "north-15km", (-3000.0, -6000.0, 13000.0)),),
+                  120: (("close", "west-23km", None),)}
 # epochs of it also run through the centre process (spawn, protocol, the caster side's sinks)
 CENTRE_PROCESS_EPOCHS = 20
 # RTCM encoder case: the station streams of the first seconds of the same run
 RTCM_EPOCHS = 30
-# Real networks through `augnet vrs`'s reading: catnet's first two hours at 30 s, nl-network's 19 epochs
+# seeded float ambiguity problems for the integer search and partial fixing
+AMBIGUITY_PROBLEMS = 200
+# Real networks through `augnet vrs`: catnet's first two hours at 30 s, nl-network's 19 epochs
 CATNET_EPOCHS = 240
 CATNET_STATIONS = ("CREU", "EBRE", "GARR")
+CATNET_VRS_AT = "41.39,2.11,100"  # Barcelona, by UPC1 (inside the network's reach, 20 km from GARR)
+NL_VRS_AT = "52.0,4.5,50"  # as test_postprocess.py
 # GARR -> UPC1 (20 km): UPC1 at 1 Hz against GARR's 30 s epochs, so corrections up to 30 s old are used
 UPC1_EPOCHS = 300
 UPC1_MAX_AGE_S = 31.0
@@ -68,23 +76,39 @@ def _sim(duration_s: int = CENTRE_SIM_S):
 
 
 def _centre_run():
-    """The centre engine fed the simulated stations epoch by epoch with VRS sessions open: per epoch, the
-    VRS bytes of each session and the network's state. Computed once per process (two cases read it)."""
+    """The centre engine fed the simulated stations epoch by epoch with VRS sessions open (one moved, one
+    opened and one closed on the way, SESSION_EVENTS): per epoch, each session's VRS bytes (MSM7, as served,
+    and MSM4 from a second encoder given the same VRS epochs), the bus messages and the network's state.
+    Computed once per process (three cases read it)."""
     if "centre" in _SIM_CACHE:
         return _SIM_CACHE["centre"]
     world, streams, stations = _sim()
     engine = probes.centre_engine(stations, world.t0)
+    msm4 = probes.vrs_encoder(4)
     check = world.receivers[world.receiver_ids.index("check1")].ecef[0]
     got: dict[str, bytearray] = {}
-    points = {}
-    for name, off in VRS_OFFSETS_M.items():
+
+    def open_session(name: str, offset_m) -> None:
         got[name] = bytearray()
-        points[name] = check + np.array(off)
-        lat, lon, h = probes.geodetic_deg(points[name])
+        lat, lon, h = probes.geodetic_deg(check + np.array(offset_m))
         engine.open_session(name, lat, lon, h, got[name].extend)
+        msm4.add(name, engine.sessions[name].station_id, engine.sessions[name].point_ecef)
+
+    for name, off in VRS_OFFSETS_M.items():
+        open_session(name, off)
     epochs, vrs_bytes, outbox = [], [], []
     now = 0.0
     for e in range(CENTRE_SIM_S):
+        for kind, name, off in SESSION_EVENTS.get(e, ()):
+            if kind == "open":
+                open_session(name, off)
+            elif kind == "move":
+                engine.move_session(name, *probes.geodetic_deg(check + np.array(off)))
+                msm4.move(name, engine.sessions[name].point_ecef)
+            else:
+                engine.close_session(name)
+                msm4.remove(name)
+                del got[name]
         for name in stations:
             engine.feed(name, streams.epoch_bytes[name][e][1], now)
         now += 1.0
@@ -94,13 +118,21 @@ def _centre_run():
         vrs = {name: bytes(buf) for name, buf in got.items()}
         for buf in got.values():
             buf.clear()
+        if reports[0].vrs is not None:
+            for name, data in msm4.encode(list(engine.sessions), reports[0].vrs, engine.nav).items():
+                vrs[f"{name}.msm4"] = data
         vrs_bytes.append(vrs)
         outbox.append(_outbox_item(engine.drain_outbox()))
         epochs.append(_network_record(reports[0].network, engine.network))
     out = {"world": world, "streams": streams, "stations": stations, "network": epochs, "vrs": vrs_bytes,
-           "points": points, "outbox": outbox}
+           "outbox": outbox}
     _SIM_CACHE["centre"] = out
     return out
+
+
+def _centre_run_meta() -> dict:
+    return {"scenario": "network-70km", "seconds": CENTRE_SIM_S, "sessions_offset_from_check1_m": VRS_OFFSETS_M,
+            "session_events": SESSION_EVENTS}
 
 
 def _outbox_item(messages) -> list:
@@ -194,14 +226,60 @@ def wire(shared: Path | None) -> dict:
     return {"epochs": epochs, "meta": {}}
 
 
+def _ambiguity_problem(rng, n: int, sigma_cyc: float, bias_cyc: float):
+    """Float DD ambiguities over two frequencies' worth of correlated geometry: (a_hat, Q, true integers)."""
+    G = rng.normal(size=(n, 3))
+    Q = sigma_cyc**2 * (np.eye(n) + np.ones((n, n))) + 50.0 * sigma_cyc**2 * G @ G.T / n
+    a = rng.integers(-50, 51, n).astype(float)
+    a_hat = a + np.linalg.cholesky(Q) @ rng.normal(size=n) + bias_cyc * rng.normal(size=n)
+    return a_hat, Q, a
+
+
+def _sig6(x: float) -> str:
+    return f"{float(x):.6g}"
+
+
+def _conditioned_mcyc(a_hat, Q, fix) -> list[int] | None:
+    """The float ambiguities conditioned on a partial fix's constraints Zs^T a = z [milli-cycles]: the same for
+    any integer basis of the fixed combinations."""
+    if fix is None:
+        return None
+    Zs = np.asarray(fix.Zs, float)
+    K = Q @ Zs @ np.linalg.inv(Zs.T @ Q @ Zs)
+    a = a_hat - K @ (Zs.T @ a_hat - np.asarray(fix.z_fixed, float))
+    return [int(round(v * 1e3)) for v in a]
+
+
+def ambiguity(shared: Path | None) -> dict:
+    """Integer least squares and each partial-fixing policy on seeded float ambiguity problems (well and badly
+    determined, biased and not): best two integer vectors, ratio, success rate, and what each partial fix
+    fixes (count, and the float solution conditioned on it, in milli-cycles)."""
+    rng = np.random.default_rng(18)
+    epochs = []
+    for k in range(AMBIGUITY_PROBLEMS):
+        n = int(rng.integers(4, 25))
+        sigma = float(rng.choice([0.01, 0.05, 0.15, 0.4]))
+        bias = float(rng.choice([0.0, 0.0, 0.1, 0.3]))
+        a_hat, Q, truth = _ambiguity_problem(rng, n, sigma, bias)
+        cands, ratio, rate = probes.lambda_best_two(a_hat, Q)
+        rec = {"t": k, "n": n, "best": np.asarray(cands).astype(int).tolist(), "ratio": _sig6(ratio),
+               "success_rate": _sig6(rate)}
+        for name, fix in probes.partial_fixes(a_hat, Q).items():
+            rec[f"{name}.count"] = None if fix is None else int(fix.count)
+            rec[f"{name}.ratio"] = None if fix is None else _sig6(fix.ratio)
+            rec[f"{name}.success_rate"] = None if fix is None else _sig6(fix.success_rate)
+            rec[f"{name}.a_fixed_mcyc"] = _conditioned_mcyc(a_hat, Q, fix)
+        epochs.append(rec)
+    return {"epochs": epochs, "meta": {"problems": AMBIGUITY_PROBLEMS, "seed": 18}}
+
+
 def vrs_streams(shared: Path | None) -> dict:
     """The centre engine's VRS bytes per epoch and session over the simulated run (the engine's own decoding
     of the station bytes, network solve, synthesis and encoding)."""
     run = _centre_run()
     epochs = [{"t": ne["t"], "bus": bus, **{name: _bytes_item(data) for name, data in vrs.items()}}
               for ne, vrs, bus in zip(run["network"], run["vrs"], run["outbox"])]
-    return {"epochs": epochs, "meta": {"scenario": "network-70km", "seconds": CENTRE_SIM_S,
-                                       "sessions_offset_from_check1_m": VRS_OFFSETS_M}}
+    return {"epochs": epochs, "meta": _centre_run_meta()}
 
 
 def centre_network_sim(shared: Path | None) -> dict:
@@ -210,33 +288,46 @@ def centre_network_sim(shared: Path | None) -> dict:
     return {"epochs": run["network"], "meta": {"scenario": "network-70km", "seconds": CENTRE_SIM_S}}
 
 
-def _network_folder_run(stations, times, epoch, nav, n: int) -> list[dict]:
-    net = probes.network_solver(stations)
-    out = []
-    for e in range(min(n, len(times))):
-        ne = net.update(epoch(e), nav)
-        out.append(_network_record(ne, net))
-    return out
+def _augnet_vrs_case(folder: Path, at: str, epochs: int | None) -> tuple[list[dict], dict]:
+    """`augnet vrs` on a folder: per processed epoch the network record, and the VRS epoch it wrote (none
+    when the epoch was skipped); meta: the RINEX header it writes."""
+    network = []
+    result, header = probes.augnet_vrs(folder, at, lambda ne, solver: network.append(_network_record(ne, solver)),
+                                       epochs)
+    by_t = {}
+    for ep, mode, n in zip(result.epochs, result.epoch_mode, result.corrected_sats):
+        by_t[round(float(ep.t_gpst), 3)] = _vrs_epoch_record(ep, mode, n)
+    for rec in network:
+        rec["vrs"] = by_t.pop(round(rec["t"], 3), None)
+    if by_t:
+        raise AssertionError(f"VRS epochs at times the network did not solve: {sorted(by_t)[:3]}")
+    return network, {"rinex_header": header, "vrs_masters": dict(sorted(result.vrs_masters.items())),
+                     "skipped_epochs": int(result.skipped_epochs)}
+
+
+def _vrs_epoch_record(ep, mode: str, corrected: int) -> dict:
+    lam = 299792458.0 / np.asarray(ep.freq_hz, float)
+    return {"mode": mode, "corrected": int(corrected), "sats": [str(s) for s in ep.sats],
+            "codes": [[str(c) for c in row] for row in ep.codes], "lli": np.asarray(ep.lli).astype(int).tolist(),
+            "vrs_code": tenth_mm_rows(ep.code_m), "vrs_phase": tenth_mm_rows(np.asarray(ep.phase_cyc) * lam)}
 
 
 def centre_network_catnet(shared: Path | None) -> dict:
-    """catnet-2010-077's CREU, EBRE, GARR (130-290 km, GPS L1/L2, 30 s) read as `augnet vrs` reads a
-    folder, the network solved epoch by epoch from the day's start."""
+    """`augnet vrs` on catnet-2010-077's CREU, EBRE, GARR (130-290 km, GPS L1/L2, 30 s) from the day's start,
+    the VRS at CATNET_VRS_AT: the network (fixed tables, DD corrections) and the VRS epoch by epoch."""
     src = shared / "rinex" / "catnet-2010-077"
     with tempfile.TemporaryDirectory() as tmp:
         for name in [f"{s}0770.10o.gz" for s in CATNET_STATIONS] + ["brdc0770.10n.gz"]:
             os.symlink(src / name, Path(tmp) / name)
-        stations, times, epoch, nav = probes.load_network_folder(Path(tmp))
-        epochs = _network_folder_run(stations, times, epoch, nav, CATNET_EPOCHS)
+        epochs, meta = _augnet_vrs_case(Path(tmp), CATNET_VRS_AT, CATNET_EPOCHS)
     return {"epochs": epochs, "meta": {"folder": "rinex/catnet-2010-077", "stations": list(CATNET_STATIONS),
-                                       "epochs": CATNET_EPOCHS}}
+                                       "epochs": CATNET_EPOCHS, "at": CATNET_VRS_AT, **meta}}
 
 
 def centre_network_nl(shared: Path | None) -> dict:
-    """nl-network-2021's four Dutch stations (35-150 km) as `augnet vrs` reads them."""
-    stations, times, epoch, nav = probes.load_network_folder(shared / "rinex" / "nl-network-2021")
-    return {"epochs": _network_folder_run(stations, times, epoch, nav, len(times)),
-            "meta": {"folder": "rinex/nl-network-2021"}}
+    """`augnet vrs` on nl-network-2021's four Dutch stations (35-150 km), the VRS at NL_VRS_AT."""
+    epochs, meta = _augnet_vrs_case(shared / "rinex" / "nl-network-2021", NL_VRS_AT, None)
+    return {"epochs": epochs, "meta": {"folder": "rinex/nl-network-2021", "at": NL_VRS_AT, **meta}}
 
 
 def _solution_records(sols) -> list[dict]:
@@ -315,17 +406,33 @@ def centre_process(shared: Path | None) -> dict:
     got = asyncio.run(probes.centre_service_run(stations, world.t0, fixes, feed))
     epochs = [{"t": t, "bus": _outbox_item(bus), **{name: _bytes_item(vrs[name]) for name in VRS_OFFSETS_M}}
               for t, vrs, bus in got]
-    return {"epochs": epochs, "meta": {"scenario": "network-70km", "seconds": CENTRE_SIM_S,
-                                       "sessions_offset_from_check1_m": VRS_OFFSETS_M}}
+    if any(e < CENTRE_PROCESS_EPOCHS for e in SESSION_EVENTS):
+        raise AssertionError("the centre process case covers the epochs before the first session event only")
+    return {"epochs": epochs, "meta": _centre_run_meta()}
+
+
+def run(case: str, shared: Path | None) -> dict:
+    """A case's outputs as its golden file holds them (through JSON: tuples become lists, keys strings),
+    computed with one BLAS thread (what `make test` and the services use: the float sums in one order)."""
+    import json
+
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        result = CASES[case][0](shared)
+    return json.loads(json.dumps({"meta": result["meta"], "epochs": result["epochs"]}, sort_keys=True,
+                                 allow_nan=False))
 
 
 # Cases without a golden file of their own: compared with the first epochs of another case's.
-GOLDEN_SOURCE = {"centre_process": ("vrs_streams", CENTRE_PROCESS_EPOCHS)}
+# (golden case, its first epochs, the items compared)
+GOLDEN_SOURCE = {"centre_process": ("vrs_streams", CENTRE_PROCESS_EPOCHS, ("t", "bus", *VRS_OFFSETS_M))}
 
 # name -> (function, needs ../shared/data, slow (> ~20 s alone))
 CASES: dict[str, tuple[Callable[[Path | None], dict], bool, bool]] = {
     "rtcm_encoder": (rtcm_encoder, False, False),
     "wire": (wire, False, False),
+    "ambiguity": (ambiguity, False, False),
     "vrs_streams": (vrs_streams, False, True),
     "centre_network_sim": (centre_network_sim, False, True),
     "onboard_sim_vrs": (onboard_sim_vrs, False, True),

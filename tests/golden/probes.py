@@ -135,6 +135,12 @@ def centre_engine(stations: dict, t0: float, name: str = "golden"):
     return CentreEngine(stations, t0, network_name=name)
 
 
+def vrs_encoder(msm_level: int):
+    from augnet.centre.vrs_stream import VrsStreamEncoder
+
+    return VrsStreamEncoder(msm_level)
+
+
 def network_solver(stations: dict, master: str | None = None):
     from augnet.centre.network import NetworkSolver
 
@@ -157,20 +163,57 @@ def baseline_refs(solver) -> dict[str, str]:
     return dict(solver.refs)
 
 
-def load_network_folder(folder: Path, exclude: tuple[str, ...] = ()):
-    """`augnet vrs`'s reading of a folder of station RINEX: (stations by name -> ECEF, epochs (times, rows),
-    per-epoch StationEpoch maker, navigation)."""
-    from augnet.centre.observations import from_obsdata
-    from augnet.centre.postprocess import align_epochs, load_network
+def augnet_vrs(folder: Path, at: str, on_network, epochs: int | None = None):
+    """`augnet vrs`'s post-processing of a folder of station RINEX (`load_network`, then `process`) for the
+    VRS at `at`, its first `epochs` common epochs only (None: all). `on_network(network_epoch, solver)` sees
+    the network solver after every epoch. Returns (VrsResult, the RINEX 3 header it writes)."""
+    import dataclasses
 
-    inp = load_network(folder, exclude=exclude)
-    times, rows = align_epochs(inp.stations)
-    by = {s.name: s for s in inp.stations}
+    from augnet.centre import postprocess as pp
+    from augnet.gnss.rinex.obs import write_obs
 
-    def epoch(e: int) -> dict:
-        return {name: from_obsdata(by[name].obs, int(r[e]), name) for name, r in rows.items() if r[e] >= 0}
+    inp = pp.load_network(folder)
+    if epochs is not None:
+        times, _ = pp.align_epochs(inp.stations)
+        end = times[min(epochs, len(times)) - 1] + pp.EPOCH_MATCH_S
+        inp.stations = [dataclasses.replace(st, obs=_obs_until(st.obs, end)) for st in inp.stations]
+    solver_class = pp.NetworkSolver
+    seen = []
 
-    return {s.name: s.xyz_m for s in inp.stations}, times, epoch, inp.nav
+    class Recording(solver_class):  # process() builds its own solver: this one shows each epoch's state
+        def update(self, *args, **kwargs):
+            ne = super().update(*args, **kwargs)
+            seen.append(ne.t_gpst)
+            on_network(ne, self)
+            return ne
+
+    pp.NetworkSolver = Recording
+    try:
+        result = pp.process(inp, pp.parse_point(at))
+    finally:
+        pp.NetworkSolver = solver_class
+    if not seen:
+        raise AssertionError("augnet vrs's process() no longer builds postprocess.NetworkSolver: update this probe")
+    data = pp.to_obsdata(result)
+    data.header.date = "20261201 000000 UTC"  # the writer's default is the wall clock
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "vrs.obs"
+        write_obs(out, data)
+        text = out.read_text()
+    return result, text[:text.index("END OF HEADER")]
+
+
+def _obs_until(obs, end_s: float):
+    import dataclasses
+
+    keep = obs.times < end_s
+    return dataclasses.replace(obs, times=obs.times[keep], flags=obs.flags[keep],
+                               clock_offset_s=obs.clock_offset_s[keep],
+                               obs={k: v[keep] for k, v in obs.obs.items()},
+                               lli={k: v[keep] for k, v in obs.lli.items()},
+                               ssi={k: v[keep] for k, v in obs.ssi.items()})
 
 
 def geodetic_deg(ecef) -> tuple[float, float, float]:
@@ -318,3 +361,27 @@ async def centre_service_run(stations: dict, t0: float, fixes: dict, feed: list)
     finally:
         await svc.stop()
     return out
+
+
+# --- integer ambiguity resolution --------------------------------------------------------------------
+
+
+def lambda_best_two(a_hat, Q):
+    """(best two integer vectors, ratio, bootstrapped success rate) of integer least squares."""
+    from augnet.gnss.ambiguity import lambda_search
+
+    res = lambda_search(a_hat, Q, 2)
+    return res.candidates, res.ratio, res.success_rate
+
+
+def partial_fixes(a_hat, Q) -> dict:
+    """The partial fix as the centre's baseline filter and the onboard RTK each call it with their default
+    settings: name -> PartialFix or None (Zs, z_fixed, ratio, success_rate). When one policy serves both,
+    call it here with each estimator's settings."""
+    from augnet.centre.baseline import BaselineConfig
+    from augnet.gnss.ambiguity import partial_fix
+    from augnet.onboard.rtk import RtkOptions, fix_policy
+
+    c = BaselineConfig()
+    return {"centre": partial_fix(a_hat, Q, c.fix_min_success_rate, c.fix_ratio, c.fix_min_count),
+            "onboard": partial_fix(a_hat, Q, fix_policy(RtkOptions()))}

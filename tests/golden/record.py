@@ -11,7 +11,7 @@ import sys
 import time
 
 from tests.conftest import SHARED_DATA
-from tests.golden.cases import CASES, GOLDEN_SOURCE
+from tests.golden.cases import CASES, GOLDEN_SOURCE, run
 from tests.golden.compare import DATA_DIR, dumps, path_of
 
 
@@ -24,7 +24,7 @@ def main(argv: list[str]) -> int:
     DATA_DIR.mkdir(exist_ok=True)
     shared = SHARED_DATA if SHARED_DATA.is_dir() else None
     for name in names:
-        fn, needs_shared, _ = CASES[name]
+        _, needs_shared, _ = CASES[name]
         if name in GOLDEN_SOURCE:
             print(f"{name}: nothing to write (compared with {GOLDEN_SOURCE[name][0]}'s file)")
             continue
@@ -32,7 +32,7 @@ def main(argv: list[str]) -> int:
             print(f"{name}: skipped, {SHARED_DATA} is absent")
             continue
         c0 = time.process_time()
-        data = dumps(name, fn(shared))
+        data = dumps(name, run(name, shared if needs_shared else None))
         path = path_of(name)
         old = path.read_bytes() if path.exists() else None
         path.write_bytes(data)

@@ -56,3 +56,12 @@ def test_corrupt_observation_file_exit_2(tmp_path, shared_data):
               "--out", str(tmp_path / "o.csv")])
     assert r.exit_code == 2
     assert "cannot read observations" in r.output
+
+
+@pytest.mark.parametrize("assignment, named", [("no_such=1", "no_such"), ("ionosphere=sometimes", "ionosphere"),
+                                               ("ratio_threshold=high", "ratio_threshold"), ("ratio_threshold", "NAME=VALUE")])
+def test_a_bad_setting_exits_2_naming_it(tmp_path, assignment, named):
+    r = _cli(["--rover", str(tmp_path / "r.obs"), "--base", str(tmp_path / "b.obs"), "--nav", str(tmp_path / "n.nav"),
+              "--out", str(tmp_path / "o.csv"), "--opt", "min_fix_ambiguities=5", "--opt", assignment])
+    assert r.exit_code == 2
+    assert named in r.output

@@ -166,3 +166,24 @@ def test_no_base_at_all_gives_single(nav, sats):
     sols = list(process(rover, empty, nav, BASE, RtkOptions(systems=("G", "E"))))
     assert [s.status for s in sols] == [Status.SINGLE] * 3
     assert all("no base" in s.message for s in sols)
+
+
+def test_reset_starts_the_filter_afresh(nav, sats):
+    from augnet.onboard.observations import choose_signals, epochs
+    from augnet.onboard.rtk import RtkFilter
+
+    rover, base, _ = _pair(nav, sats, _rover_at(1500.0, -1200.0, 8.0), n=6)
+    opt = RtkOptions(systems=("G", "E"))
+    r_ep = epochs(rover, opt.n_slots, opt.systems, choose_signals(rover, opt.n_slots, opt.systems))
+    b_ep = epochs(base, opt.n_slots, opt.systems, choose_signals(base, opt.n_slots, opt.systems))
+    used = RtkFilter(nav, BASE, opt)
+    for r, b in zip(r_ep, b_ep):
+        used.step(r, b)
+    assert len(used.layout) > 0 and used.consecutive_fixes > 0
+    used.reset()
+    assert len(used.layout) == 0 and not used.initialised and used.confirmation.decision is None
+    fresh = RtkFilter(nav, BASE, opt)
+    for r, b in zip(r_ep[:3], b_ep[:3]):
+        a, f = used.step(r, b), fresh.step(r, b)
+        assert (a.status, a.message, dict(a.fixed_dd)) == (f.status, f.message, dict(f.fixed_dd))
+        np.testing.assert_array_equal(a.position_m, f.position_m)
