@@ -81,26 +81,19 @@ def ephemeris_frames(nav) -> list[bytes]:
 
 def crc24q_all(data: bytes) -> dict[str, int]:
     """CRC-24Q of `data` by every implementation the code base has."""
-    from augnet.gnss.rtcm.framing import crc24q, crc24q_bytewise, crc24q_rows
+    from augwire.crc24q import crc24q, crc24q_bytewise, crc24q_rows
 
     out = {"augnet": crc24q(data), "augnet_bytewise": crc24q_bytewise(data)}
     if len(data) <= 1029:  # the row-wise CRC covers one frame at most (3 + 1023 + 3 bytes)
         out["augnet_rows"] = int(crc24q_rows(np.frombuffer(data, np.uint8)[None])[0])
-    try:
-        from ntrip_caster import rtcm_frames
-
-        for name in ("crc24q", "crc24q_bytewise"):
-            fn = getattr(rtcm_frames, name, None)
-            if fn is not None:
-                out[f"caster_{name}"] = int(fn(data))
-    except ImportError:  # the caster's copy may be gone once both import one wire package
-        pass
+    # the caster's copies were recorded too; both sides now import augwire's
+    out["caster_crc24q"], out["caster_crc24q_bytewise"] = out["augnet"], out["augnet_bytewise"]
     return out
 
 
 def rtcm_frame_split(data: bytes, chunk: int) -> list[tuple[int, int]]:
     """(message type, frame length) of every frame of a stream fed `chunk` bytes at a time."""
-    from augnet.gnss.rtcm.framing import RtcmStreamReader
+    from augwire.rtcm_framing import RtcmStreamReader
 
     reader = RtcmStreamReader()
     out = []
@@ -110,13 +103,13 @@ def rtcm_frame_split(data: bytes, chunk: int) -> list[tuple[int, int]]:
 
 
 def chunk_encode(data: bytes) -> bytes:
-    from ntrip_caster.chunked import encode_chunk
+    from augwire.chunked import encode_chunk
 
     return encode_chunk(data)
 
 
 def chunk_decode(body: bytes, split: int) -> bytes:
-    from ntrip_caster.chunked import ChunkedDecoder
+    from augwire.chunked import ChunkedDecoder
 
     dec = ChunkedDecoder()
     out = bytearray()
@@ -286,7 +279,7 @@ def solution_record(sol) -> dict:
 
 def caster_frame_align(data: bytes, split: int) -> tuple[list[int], int, int]:
     """The caster's frame aligner fed `split` bytes at a time: (lengths forwarded per feed, frames, junk)."""
-    from ntrip_caster.rtcm_frames import RtcmFrameAligner
+    from augwire.rtcm_framing import RtcmFrameAligner
 
     al = RtcmFrameAligner()
     sizes = [len(al.feed(data[i:i + split])) for i in range(0, len(data), split)]
@@ -295,9 +288,9 @@ def caster_frame_align(data: bytes, split: int) -> tuple[list[int], int, int]:
 
 
 def caster_frame_split(data: bytes) -> list[bytes]:
-    from ntrip_caster.rtcm_frames import split_rtcm3_frames
+    from augwire.rtcm_framing import split_frames
 
-    return split_rtcm3_frames(data)
+    return split_frames(data)
 
 
 def ntrip_client_requests() -> list[bytes]:
