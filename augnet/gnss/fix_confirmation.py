@@ -41,10 +41,11 @@ class IntegerDecision:
         """The decision of a fix Hc x = z_fixed (rows over the full state) with fixed state x_fix, P_fix:
         the DD ambiguities x[i] - x[iref] it determines, then its fixed combinations.  `identity` names the
         state of a column of Hc."""
-        cols = np.flatnonzero(np.any(Hc != 0.0, axis=0))
-        pos = {int(c): j for j, c in enumerate(cols)}
         var = P_fix[i, i] + P_fix[iref, iref] - 2.0 * P_fix[i, iref]
         det = np.flatnonzero(var < max_sigma_cyc**2)
+        # a DD ambiguity determined without a coefficient in the fix (held from earlier epochs) is a column too
+        cols = np.union1d(np.flatnonzero(np.any(Hc != 0.0, axis=0)), np.concatenate((i[det], iref[det])))
+        pos = {int(c): j for j, c in enumerate(cols)}
         C_dd = np.zeros((len(det), len(cols)))
         C_dd[np.arange(len(det)), [pos[int(c)] for c in i[det]]] = 1.0
         C_dd[np.arange(len(det)), [pos[int(c)] for c in iref[det]]] = -1.0

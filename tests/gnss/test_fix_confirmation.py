@@ -71,3 +71,16 @@ def test_undetermined_functionals_do_not_count():
     c.observe(_decision(x, P, NAMES), _index_of(NAMES), x, P)
     _, loose = _fixed_state([0, 3, 5, -2, 8], sigma=0.5)  # the same values, but nothing determined
     assert c.observe(_decision(x, P, NAMES), _index_of(NAMES), x, loose) == 1
+
+
+def test_a_determined_ambiguity_outside_the_fixed_combinations_is_part_of_the_decision():
+    # the fix constrains G04..G06 only; G07's DD is determined already (held): the decision covers it too
+    x, P = _fixed_state([0, 3, 5, -2, 8])
+    Hc = np.zeros((3, 8))
+    Hc[np.arange(3), I[:3]] = 1.0
+    Hc[np.arange(3), IREF[:3]] = -1.0
+    d = IntegerDecision.from_fix(lambda i: NAMES[i], I, IREF, Hc, np.round(Hc @ x), x, P)
+    assert set(d.states) == set(NAMES.values())
+    assert d.agrees(_index_of(NAMES), x, P, min_count=4)
+    x2, _ = _fixed_state([0, 3, 5, -2, 9])
+    assert not d.agrees(_index_of(NAMES), x2, P, min_count=4)

@@ -141,3 +141,28 @@ def test_yokohama_moving_rover_agrees_with_rtklib_and_fixes_at_least_as_often(sh
     assert rate_ours >= rate_theirs
     assert len(diffs) >= 0.8 * n_theirs  # where RTKLIB fixes, we mostly do too
     assert agree >= 0.95
+
+
+@pytest.mark.parametrize("option", ["ionosphere=estimate", "confirm_epochs=2"])
+def test_yokohama_other_settings_run_every_epoch(shared_data, tmp_path, option):
+    """A DD ambiguity held from earlier epochs but outside a partial fix's combinations used to raise KeyError
+    out of RtkFilter.step (epochs 49 and 65 with these settings)."""
+    d = shared_data / YOKOHAMA
+    args = ["--rover", str(d / "rover-SEPT265G.21O"), "--base", str(d / "base-3034265G.21O"),
+            "--nav", str(d / "nav-SEPT2650.21P"), "--base-pos", "header", "--systems", "GEJ",
+            "--frequencies", "2", "--elevation-mask", "15"]
+    r = _cli([*args, "--out", str(tmp_path / "default.csv")])
+    assert r.exit_code == 0, r.output
+    r = _cli([*args, "--out", str(tmp_path / "other.csv"), "--opt", option])
+    assert r.exit_code == 0, r.output
+    default = {row["gpst_s"]: row for row in _read_csv(tmp_path / "default.csv")}
+    other = _read_csv(tmp_path / "other.csv")
+    assert len(other) == 360
+    both = [(row, default[row["gpst_s"]]) for row in other
+            if row["status"] == "fix" and default.get(row["gpst_s"], {}).get("status") == "fix"]
+    assert len(both) >= 300
+    if option == "confirm_epochs=2":  # the same integers, confirmed sooner
+        for a, b in both:
+            pa = np.array([float(a[k]) for k in ("x_m", "y_m", "z_m")])
+            pb = np.array([float(b[k]) for k in ("x_m", "y_m", "z_m")])
+            assert np.linalg.norm(pa - pb) < 0.01
