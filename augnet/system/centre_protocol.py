@@ -70,10 +70,11 @@ PROTOCOL_VERSION = 1
 # 64 MiB is room for an ungrouped epoch of tens of thousands of sessions while a corrupted length (up to
 # 4 GiB) is refused before it is buffered
 MAX_BODY_BYTES = 64 << 20
-# the decoder's buffer: a VRS group (~0.5 MB) and the socket read behind it (asyncio reads 256 KiB) fit;
-# kept while frames fit in KEEP_BUFFER_BYTES
+# the decoder's buffer: a VRS group (~0.5 MB) and the read behind it fit; kept while frames fit in
+# KEEP_BUFFER_BYTES
 RECEIVE_BUFFER_BYTES = 2 << 20
 KEEP_BUFFER_BYTES = 8 << 20
+MIN_READ_BYTES = 256 << 10  # room offered to a read (asyncio's own read size, selector_events.max_size)
 _HEADER = struct.Struct("<2sBBI")
 HEADER_BYTES = _HEADER.size
 
@@ -347,10 +348,10 @@ class _Array:
         text = code.rstrip(b" ")
         try:
             dtype = np.dtype(text.decode("ascii"))
-        except (TypeError, ValueError) as exc:
+        except Exception as exc:  # noqa: BLE001 - numpy's parser raises TypeError, ValueError, SyntaxError...
             raise ProtocolError(f"malformed body: dtype {text!r}: {exc}") from None
-        if dtype.hasobject or dtype.kind == "V":
-            raise ProtocolError(f"malformed body: dtype {text!r} refused (objects and raw records do not cross)")
+        if dtype.hasobject or dtype.kind == "V" or dtype.subdtype is not None:
+            raise ProtocolError(f"malformed body: dtype {text!r} refused (objects and records do not cross)")
         if len(self._dtypes) < 64:  # garbage must not grow it
             self._dtypes[code] = dtype
         return dtype
@@ -367,8 +368,9 @@ class _PackedBytes:
 
     def get(self, r: _Reader) -> list[bytes]:
         n = r.unpack(_U32)[0]
+        lengths = np.frombuffer(r.take(4 * n), "<u4")  # read before anything is allocated for n items
         off = np.zeros(n + 1, np.int64)
-        np.cumsum(np.frombuffer(r.take(4 * n), "<u4"), out=off[1:])
+        np.cumsum(lengths, out=off[1:])
         bounds = off.tolist()
         view = r.take(bounds[-1])
         # each item copied once, straight from the frame (an intermediate copy of the whole group is a
@@ -526,8 +528,10 @@ class Decoder:
     """Frames in, messages out; partial frames are kept until the rest arrives.
 
     `expect`: the message classes this end accepts (FROM_LOOP in the centre, FROM_CENTRE in the loop).
-    Bytes are gathered in one buffer that is reused, not reallocated: a VRS group is ~0.5 MB, and fresh
-    memory for each costs a page fault per 4 kB."""
+    Bytes are gathered in one buffer that is reused, not reallocated (a VRS group is ~0.5 MB, and fresh
+    memory for each costs a page fault per 4 kB); a reader may receive straight into it (`get_buffer`,
+    then `buffer_updated`: asyncio's BufferedProtocol, `socket.recv_into`) or hand over bytes it read
+    (`receive_data`)."""
 
     __slots__ = ("_buf", "_start", "_end", "_codes", "max_body_bytes", "failed")
 
@@ -542,13 +546,46 @@ class Decoder:
     def receive_data(self, data: bytes) -> list[Message]:
         """Feed bytes from the peer; returns the messages they complete. Raises ProtocolError on bad input
         (and on every call after it)."""
+        self._check_failed()
+        n = len(data)
+        self._make_room(n)
+        self._buf[self._end:self._end + n] = data  # same length: a copy into the buffer, no resize
+        self._end += n
+        return self._messages()
+
+    def get_buffer(self, size_hint: int = -1) -> memoryview:
+        """The buffer's free end (at least `MIN_READ_BYTES`, or `size_hint`), to read into; release it
+        before the next call."""
+        self._make_room(max(size_hint, MIN_READ_BYTES))
+        with memoryview(self._buf) as whole:
+            return whole[self._end:]
+
+    def buffer_updated(self, nbytes: int) -> list[Message]:
+        """`nbytes` were read into the buffer from `get_buffer`: the messages they complete (as
+        `receive_data`)."""
+        self._check_failed()
+        self._end += nbytes
+        return self._messages()
+
+    def _check_failed(self) -> None:
         if self.failed is not None:
             raise ProtocolError(f"stream already failed: {self.failed}")
-        self._append(data)
+
+    def _make_room(self, n: int) -> None:
+        if self._end + n <= len(self._buf):
+            return
+        unread = self._end - self._start  # move the unread bytes to the front, then grow if need be
+        if self._start:
+            self._buf[:unread] = self._buf[self._start:self._end]
+            self._start, self._end = 0, unread
+        if unread + n > len(self._buf):
+            self._buf.extend(bytes(unread + n - len(self._buf)))
+
+    def _messages(self) -> list[Message]:
         out: list = []
         pos, end = self._start, self._end
         try:
-            with memoryview(self._buf) as view:  # released before the buffer is resized
+            with memoryview(self._buf) as view:
                 while end - pos >= HEADER_BYTES:
                     code, size = self._check_header(view, pos)
                     start = pos + HEADER_BYTES
@@ -568,18 +605,6 @@ class Decoder:
             if len(self._buf) > KEEP_BUFFER_BYTES:  # after an exceptional frame: back to the usual size
                 self._buf = bytearray(RECEIVE_BUFFER_BYTES)
         return out
-
-    def _append(self, data: bytes) -> None:
-        n = len(data)
-        if self._end + n > len(self._buf):  # move the unread bytes to the front, then grow if need be
-            unread = self._end - self._start
-            if self._start:
-                self._buf[:unread] = self._buf[self._start:self._end]
-                self._start, self._end = 0, unread
-            if unread + n > len(self._buf):
-                self._buf.extend(bytes(unread + n - len(self._buf)))
-        self._buf[self._end:self._end + n] = data  # same length: a copy into the buffer, no resize
-        self._end += n
 
     def _check_header(self, view: memoryview, pos: int) -> tuple[int, int]:
         magic, version, code, size = _HEADER.unpack_from(view, pos)
