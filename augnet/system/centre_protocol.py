@@ -74,7 +74,7 @@ MAX_BODY_BYTES = 64 << 20
 # KEEP_BUFFER_BYTES
 RECEIVE_BUFFER_BYTES = 2 << 20
 KEEP_BUFFER_BYTES = 8 << 20
-MIN_READ_BYTES = 256 << 10  # room offered to a read (asyncio's own read size, selector_events.max_size)
+MIN_READ_BYTES = 256 << 10  # room offered to a read: asyncio's own read size (selector_events.max_size)
 _HEADER = struct.Struct("<2sBBI")
 HEADER_BYTES = _HEADER.size
 
@@ -554,11 +554,12 @@ class Decoder:
         return self._messages()
 
     def get_buffer(self, size_hint: int = -1) -> memoryview:
-        """The buffer's free end (at least `MIN_READ_BYTES`, or `size_hint`), to read into; release it
-        before the next call."""
-        self._make_room(max(size_hint, MIN_READ_BYTES))
+        """Room for one read at the buffer's free end: `size_hint` bytes, `MIN_READ_BYTES` when it asks
+        for less (a read as large as asyncio's own). Release it before the next call."""
+        n = max(size_hint, MIN_READ_BYTES)
+        self._make_room(n)
         with memoryview(self._buf) as whole:
-            return whole[self._end:]
+            return whole[self._end:self._end + n]
 
     def buffer_updated(self, nbytes: int) -> list[Message]:
         """`nbytes` were read into the buffer from `get_buffer`: the messages they complete (as
