@@ -474,11 +474,10 @@ LAYOUTS: dict[int, _Record] = {
     6: _Record(Stop, ()),
     16: _Record(Ready, (("pid", I64),)),
     17: _Record(VrsGroup, (("t_gpst", F64), ("client_ids", SEPARATED_STRS), ("rtcm", PACKED_BYTES),
-                           ("ready_unix_s", F64),
-                           ("arrival", _Optional(_Tuple(F64, 2))), ("cost", _Optional(_Tuple(F64, 4))),
-                           ("last", BOOL))),
-    18: _Record(EpochsSolved, (("reports", _List(EPOCH_REPORT)), ("outbox", _List(_Pair(STR, BYTES))), ("solve_s", F64),
-                               ("sessions", I64))),
+                           ("ready_unix_s", F64), ("arrival", _Optional(_Tuple(F64, 2))),
+                           ("cost", _Optional(_Tuple(F64, 4))), ("last", BOOL))),
+    18: _Record(EpochsSolved, (("reports", _List(EPOCH_REPORT)), ("outbox", _List(_Pair(STR, BYTES))),
+                               ("solve_s", F64), ("sessions", I64))),
     19: _Record(CentreError, (("text", STR),)),
     20: _Record(Alive, ()),
 }
@@ -494,18 +493,18 @@ def encode(msg: Message) -> bytes:
     if code is None:
         raise ProtocolError(f"not a centre-protocol message: {type(msg).__name__}")
     parts: list = [b""]  # the header's place: the body is joined once, behind it
-    where = type(msg).__name__
+    name = None
     try:
         for name, codec in LAYOUTS[code].layout:
-            where = f"{type(msg).__name__}.{name}"
             codec.put(parts, getattr(msg, name))
-        where = type(msg).__name__
+        name = None
         size = sum(map(len, parts))
         if size > MAX_BODY_BYTES:
-            raise ProtocolError(f"{where} body of {size} bytes over the {MAX_BODY_BYTES}-byte limit")
+            raise ProtocolError(f"{type(msg).__name__} body of {size} bytes over the {MAX_BODY_BYTES}-byte limit")
         parts[0] = _HEADER.pack(MAGIC, PROTOCOL_VERSION, code, size)
         return b"".join(parts)
     except (struct.error, TypeError, ValueError, AttributeError, OverflowError, UnicodeError) as exc:
+        where = type(msg).__name__ + (f".{name}" if name else "")
         raise ProtocolError(f"cannot encode {where}: {exc}") from None
 
 
