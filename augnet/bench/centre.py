@@ -60,18 +60,25 @@ def network_ms_per_epoch(n_stations: int, epochs: int) -> tuple[float, int]:
     return 1e3 * float(np.median(times[len(times) // 3:])), len(net.edges)
 
 
-def vrs_ms_per_epoch(trains: int, epochs: int = 8) -> tuple[float, float, int]:
-    world = _world(6, epochs)
-    stations = {r.id: r.ecef[0] for r in world.receivers}
-    net = NetworkSolver(stations)
+def vrs_sessions(trains: int, prefix: str = "T") -> tuple[list[str], np.ndarray, VrsStreamEncoder]:
+    """`trains` VRS sessions at random points along the first six stations' line (seeded): their client
+    ids, points (ECEF) and an encoder holding them."""
     rng = np.random.default_rng(1)
     lat = rng.uniform(39.0, 39.0 + 0.27 * 5 * np.cos(0.3), trains)
     lon = 116.0 + (lat - 39.0) / np.cos(0.3) * 0.35 * np.sin(0.3) / 0.27 + rng.normal(0, 0.01, trains)
     points = geodetic_deg_to_ecef(lat, lon, np.full(trains, 50.0))
     enc = VrsStreamEncoder()
-    ids = [f"T{i}" for i in range(trains)]
+    ids = [f"{prefix}{i}" for i in range(trains)]
     for i, cid in enumerate(ids):
         enc.add(cid, 2000 + i % 2000, points[i])
+    return ids, points, enc
+
+
+def vrs_ms_per_epoch(trains: int, epochs: int = 8) -> tuple[float, float, int]:
+    world = _world(6, epochs)
+    stations = {r.id: r.ecef[0] for r in world.receivers}
+    net = NetworkSolver(stations)
+    ids, points, enc = vrs_sessions(trains)
     synth, encode, nbytes = [], [], 0
     for eps in _epochs(world):
         ne = net.update(eps, world.nav)

@@ -16,6 +16,7 @@ BENCHMARKS = {
     "caster": ("augnet.bench.caster", "NTRIP caster under load (see also `augnet loadtest`)."),
     "rtk": ("augnet.bench.rtk", "Onboard RTK: time per epoch against RTKLIB rnx2rtkp."),
     "centre": ("augnet.bench.centre", "Network solution per epoch and VRS synthesis + encoding for many trains."),
+    "protocol": ("augnet.bench.protocol", "Centre-process protocol: encode/decode per epoch against pickle."),
     "up": ("augnet.bench.up", "The whole system: console p99 and 2,000 trains' correction age while augnet up demo runs."),
 }
 # `augnet bench all` runs these: the ones that finish in a minute.

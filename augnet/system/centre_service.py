@@ -11,38 +11,16 @@ taps (minus the stations an operator disabled), VRS sessions opened / moved / cl
 per-client bytes the centre returns, written to the caster's sinks. Everything else (decoding, epoch
 alignment, network solve, VRS synthesis and RTCM encoding) runs in the child, `_CentreWorker`.
 
-Message interface (both directions over one Unix socket pair; each message one frame: a 4-byte big-endian
-length, then a pickled tuple; pickle because both ends are this code base and it carries bytes and numpy
-arrays without copies of its own):
-
-  loop -> centre, one frame per loop iteration holding a list of commands in the order they happened:
-    ("data", station, rtcm_bytes, arrival_unix_s)   bytes of a station's stream as the caster got them
-    ("open", client_id, lat_deg, lon_deg, h_m)       a VRS session (the client's first usable GGA)
-    ("move", client_id, lat_deg, lon_deg, h_m)       the client moved (the caster's reposition policy);
-                                                     opened and moved sessions are added to the next
-                                                     epoch's plan between epochs (`PLAN_UPDATE_S`)
-    ("close", client_id)
-    ("written", t_gpst)                              the last group of epoch t's VRS is written to the
-                                                     sockets: the centre may solve the network
-    ("stop",)                                        finish and exit (EOF on the socket does the same)
-  centre -> loop:
-    ("ready", pid)
-    ("vrs", t_gpst, [(client_id, rtcm_bytes), ...], ready_unix_s, (first, last) station arrival | None,
-     (synthesis_s, encoding_s, cpu_s, planned_ahead), last_group)
-        the sessions' epoch t, in groups of `VRS_GROUP` sessions each sent as soon as it is encoded (the
-        loop writes one group while the centre encodes the next), all before the network solves t: the
-        solve waits for "written" (at most `WRITTEN_WAIT_S`), so on two cores it does not take a core
-        from the delivery. On the loop, `delivering()` is true from the first group written to the last
-        (other work on the loop, the onboard trains', waits for it), then `on_written(t)` runs
-    ("epoch", [EpochReport, ...], [(bus subject, payload), ...], solve_s, sessions)
-        the solved epochs (their `vrs` arrays left behind: `vrs_models` carries what the console shows),
-        the correction models and alarms for the bus
-    ("error", text)                                  a command or an epoch failed; the centre carries on
-    ("alive",)                                       a heartbeat when nothing else was sent for a second
+The two processes speak the typed messages of `augnet.system.centre_protocol` (its docstring is the
+specification: frames, field encodings, what each message means and when it is sent) over one Unix socket
+pair. A frame the loop cannot read is counted (`protocol_errors`), logged, and the centre process killed
+and handled as one that died; a frame the centre cannot read is reported to the loop (`CentreError`) and
+the centre exits, which the loop handles the same way.
 
 A child that dies, or stops answering for `HANG_S` (then it is killed), is reported (log, a critical
 `centre-process` alarm through `on_alarm`) and restarted with the open sessions (a fresh network
-solution: its ambiguities are fixed again); the alarm clears with the new child's first solved epoch. Shutdown sends "stop", waits, then terminates and kills: no orphan.
+solution: its ambiguities are fixed again); the alarm clears with the new child's first solved epoch.
+Shutdown sends `Stop`, waits, then terminates and kills: no orphan.
 The child ignores SIGINT (Ctrl-C reaches the whole process group; the parent decides) and exits when the
 parent's end of the socket closes, so it cannot outlive it.
 """
@@ -51,16 +29,14 @@ from __future__ import annotations
 
 import asyncio
 import collections
-import dataclasses
 import gc
 import logging
 import multiprocessing as mp
 import os
-import pickle
 import select
 import signal
 import socket
-import struct
+import sys
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -70,6 +46,9 @@ import numpy as np
 
 from augnet.blas_threads import limit_blas_threads
 from augnet.gnss import time as gtime
+from augnet.system.centre_protocol import (
+    FROM_CENTRE, FROM_LOOP, Alive, CentreError, CloseSession, Decoder, EpochsSolved, Message, MoveSession,
+    OpenSession, ProtocolError, Ready, StationData, Stop, VrsGroup, VrsWritten, encode)
 
 log = logging.getLogger(__name__)
 
@@ -83,13 +62,13 @@ TICK_S = 0.02  # the centre looks for timed-out epochs this often (a complete ep
 # whatever its size: 2,000 trains reporting a GGA every 5 s move 200 points a second, one or two at a time)
 PLAN_UPDATE_S = 0.1
 STOP_TIMEOUT_S = 5.0
-HEARTBEAT_S = 1.0  # the centre sends at least this often ("alive" when it has nothing else)
+HEARTBEAT_S = 1.0  # the centre sends at least this often (`Alive` when it has nothing else)
 HANG_S = 20.0  # a centre silent this long is taken for hung: killed, reported and replaced
 MAX_DELIVERY_S = 1.0  # `delivering` stays true this long at most (an epoch whose last group never came)
 RESTART_DELAY_S = 1.0
 MAX_RESTARTS = 5  # per run: a centre that keeps dying stays down (its alarm stays raised)
-_HEAD = struct.Struct(">I")
-_RECV = 1 << 20
+EXIT_PROTOCOL_ERROR = 3  # the centre's exit code when the loop's bytes could not be read
+_RECV = 1 << 20  # room the centre offers each read of the socket
 
 
 @dataclass
@@ -118,29 +97,6 @@ class CentreSpec:
     network_name: str = "line"
 
 
-def _frame(msg) -> bytes:
-    data = pickle.dumps(msg, protocol=5)
-    return _HEAD.pack(len(data)) + data
-
-
-def _split_frames(buf: bytearray) -> list:
-    """Complete messages at the head of `buf` (consumed from it)."""
-    out = []
-    pos = 0
-    n = len(buf)
-    with memoryview(buf) as view:  # released before `buf` is cut
-        while n - pos >= 4:
-            size = _HEAD.unpack_from(view, pos)[0]
-            if n - pos - 4 < size:
-                break
-            with view[pos + 4:pos + 4 + size] as part:
-                out.append(pickle.loads(part))
-            pos += 4 + size
-    if pos:
-        del buf[:pos]
-    return out
-
-
 class _Handle:
     def __init__(self, service: "CentreService", client_id: str):
         self.service = service
@@ -153,26 +109,28 @@ class _Handle:
         self.service._close(self.client_id)
 
 
-class _Channel(asyncio.Protocol):
-    """The loop's end of the socket pair: frames in, to the service."""
+class _Channel(asyncio.BufferedProtocol):
+    """The loop's end of the socket pair: frames in, to the service (read straight into the decoder's
+    buffer: no copy of a VRS group between the socket and its decoding)."""
 
     def __init__(self, service: "CentreService"):
         self.service = service
-        self.buf = bytearray()
+        self.decoder = Decoder(FROM_CENTRE)
         self.transport: asyncio.Transport | None = None
 
     def connection_made(self, transport) -> None:
         self.transport = transport
 
-    def data_received(self, data: bytes) -> None:
-        self.buf += data
+    def get_buffer(self, sizehint: int) -> memoryview:
+        return self.decoder.get_buffer(sizehint)
+
+    def buffer_updated(self, nbytes: int) -> None:
         try:
-            msgs = _split_frames(self.buf)
-        except Exception:  # noqa: BLE001 - a garbled stream: drop it, the child is restarted
-            log.exception("centre: unreadable message from the centre process")
-            self.buf.clear()
-            if self.transport is not None:
-                self.transport.close()
+            msgs = self.decoder.buffer_updated(nbytes)
+        except ProtocolError as exc:  # the messages before the bad frame, then the centre is replaced
+            for msg in exc.messages:
+                self.service._on_message(msg)
+            self.service._on_protocol_error(self, exc)
             return
         for msg in msgs:
             self.service._on_message(msg)
@@ -196,14 +154,15 @@ class CentreService:
         self.on_outbox = on_outbox
         self.on_alarm = on_alarm
         self.timings = CentreTimings()
-        self.errors = 0  # failed commands and epochs in the centre, unreadable messages, child deaths
+        self.errors = 0  # failed commands and epochs in the centre, unsendable messages, child deaths
+        self.protocol_errors = 0  # unreadable frames from the centre (each also ends that centre process)
         self.restarts = 0
         self.excluded_stations: set[str] = set()
         self.last = None  # the latest EpochReport
         self.pid: int | None = None
         self._sinks: dict[str, Callable[[bytes], None]] = {}  # loop-side sinks of live sessions
         self._positions: dict[str, tuple[float, float, float]] = {}  # to re-open them in a new child
-        self._pending: list[tuple] = []
+        self._pending: list[Message] = []
         self._flush_scheduled = False
         self._proc = None
         self._channel: _Channel | None = None
@@ -232,23 +191,23 @@ class CentreService:
 
     def feed(self, station: str, data: bytes) -> None:
         if station not in self.excluded_stations:
-            self._send(("data", station, data, time.time()))
+            self._send(StationData(station, data, time.time()))
 
     def open(self, client_id: str, mount: str, fix, sink) -> _Handle:
         self._sinks[client_id] = sink
         self._positions[client_id] = (fix.lat_deg, fix.lon_deg, fix.height_m)
-        self._send(("open", client_id, fix.lat_deg, fix.lon_deg, fix.height_m))
+        self._send(OpenSession(client_id, fix.lat_deg, fix.lon_deg, fix.height_m))
         return _Handle(self, client_id)
 
     def _move(self, client_id: str, lat: float, lon: float, h: float) -> None:
         if client_id in self._sinks:
             self._positions[client_id] = (lat, lon, h)
-            self._send(("move", client_id, lat, lon, h))
+            self._send(MoveSession(client_id, lat, lon, h))
 
     def _close(self, client_id: str) -> None:
         if self._sinks.pop(client_id, None) is not None:
             self._positions.pop(client_id, None)
-            self._send(("close", client_id))
+            self._send(CloseSession(client_id))
 
     def set_station_enabled(self, station: str, enabled: bool) -> None:
         """An operator disabled (or re-enabled) a station: its data stops reaching the solution, so
@@ -258,7 +217,7 @@ class CentreService:
         else:
             self.excluded_stations.add(station)
 
-    def _send(self, cmd: tuple) -> None:
+    def _send(self, cmd: Message) -> None:
         self._pending.append(cmd)
         if not self._flush_scheduled:
             self._flush_scheduled = True
@@ -269,11 +228,18 @@ class CentreService:
         ch = self._channel
         if ch is None or ch.transport is None or ch.transport.is_closing():
             if len(self._pending) > 100_000:  # no centre for a long while: station bytes are not kept
-                self._pending = [c for c in self._pending if c[0] != "data"]
+                self._pending = [c for c in self._pending if not isinstance(c, StationData)]
             return
         cmds, self._pending = self._pending, []
-        if cmds:
-            ch.transport.write(_frame(cmds))
+        frames = []
+        for cmd in cmds:
+            try:
+                frames.append(encode(cmd))
+            except ProtocolError:  # a value the protocol cannot carry: that command is dropped, the rest go
+                self.errors += 1
+                log.exception("centre: a command could not be encoded")
+        if frames:
+            ch.transport.write(b"".join(frames))
 
     # --- life cycle ---------------------------------------------------------------------------------------
 
@@ -308,8 +274,8 @@ class CentreService:
         _, channel = await self.loop.create_connection(lambda: _Channel(self), sock=mine)
         self._channel = channel
         # sessions the caster already has (after a restart) first, then whatever queued meanwhile
-        reopen = [("open", cid, *pos) for cid, pos in self._positions.items()]
-        pending = [c for c in self._pending if c[0] != "open"] if reopen else self._pending
+        reopen = [OpenSession(cid, *pos) for cid, pos in self._positions.items()]
+        pending = [c for c in self._pending if not isinstance(c, OpenSession)] if reopen else self._pending
         self._pending = reopen + pending
         self._flush()
 
@@ -320,7 +286,7 @@ class CentreService:
         proc = self._proc
         ch = self._channel
         if ch is not None and ch.transport is not None and not ch.transport.is_closing():
-            self._pending.append(("stop",))
+            self._pending.append(Stop())
             self._flush()
         if proc is not None:
             await self.loop.run_in_executor(None, proc.join, timeout)
@@ -334,6 +300,17 @@ class CentreService:
         if ch is not None and ch.transport is not None:
             ch.transport.close()
         self._channel = None
+
+    def _on_protocol_error(self, channel: _Channel, exc: ProtocolError) -> None:
+        """The centre sent a frame that cannot be read: counted, logged, and the stream (which lost its
+        framing) ended with the process behind it, which `_on_lost` then reports and replaces."""
+        self.protocol_errors += 1
+        proc = self._proc
+        log.error("centre: unreadable message from the centre process %s (%s): killed", self.pid, exc)
+        if channel is self._channel and proc is not None and proc.is_alive():
+            proc.kill()
+        if channel.transport is not None:
+            channel.transport.close()
 
     def _on_lost(self, channel: _Channel) -> None:
         if channel is not self._channel:
@@ -375,35 +352,36 @@ class CentreService:
 
     # --- loop side: what the centre sends -----------------------------------------------------------------
 
-    def _on_message(self, msg) -> None:
-        kind = msg[0]
+    def _on_message(self, msg: Message) -> None:
         self._last_heard = self.loop.time()
         try:
-            if kind == "vrs":
-                self._send_vrs(*msg[1:])
-            elif kind == "epoch":
-                self._deliver(*msg[1:])
-            elif kind == "error":
+            if isinstance(msg, VrsGroup):
+                self._send_vrs(msg)
+            elif isinstance(msg, EpochsSolved):
+                self._deliver(msg)
+            elif isinstance(msg, CentreError):
                 self.errors += 1
-                log.error("centre: %s", msg[1])
-            elif kind == "ready":
-                log.info("centre process %s ready", msg[1])
+                log.error("centre: %s", msg.text)
+            elif isinstance(msg, Ready):
+                log.info("centre process %s ready", msg.pid)
         except Exception:  # noqa: BLE001 - a consumer's bug must not stop the centre's output
             self.errors += 1
-            log.exception("centre: handling a %r message failed", kind)
+            log.exception("centre: handling a %s message failed", type(msg).__name__)
 
-    def _send_vrs(self, t_gpst: float, batch, ready_unix: float, arrival, cost=None, last: bool = True) -> None:
+    def _send_vrs(self, msg: VrsGroup) -> None:
         """Every client's epoch (or a group of clients': an epoch may come in several messages) to its
-        caster sink; after the last group, "written" tells the centre it may solve the network."""
+        caster sink; after the last group, `VrsWritten` tells the centre it may solve the network."""
+        t_gpst, ready_unix, arrival, cost, last = msg.t_gpst, msg.ready_unix_s, msg.arrival, msg.cost, msg.last
+        sessions = len(msg.client_ids)
         off = self._gps_minus_unix
         on_loop = time.time() + off - t_gpst
         sinks = self._sinks
-        for cid, data in batch:
+        for cid, data in zip(msg.client_ids, msg.rtcm):
             sink = sinks.get(cid)
             if sink is not None:
                 sink(data)
         if last:
-            self._send(("written", t_gpst))
+            self._send(VrsWritten(t_gpst))
             self._delivering_since = None
             if self.on_written is not None:
                 self.loop.call_soon(self.on_written, t_gpst)
@@ -415,7 +393,7 @@ class CentreService:
         stages = self.timings.stages
         if stages and stages[-1][0] == t_gpst:  # a further group of the epoch
             rec = stages[-1]
-            rec[1] += len(batch)
+            rec[1] += sessions
             rec[3], rec[5], rec[6:9], rec[10] = ready, sent, list(cost[:3]), cost[3]
             rec[9] += sent - on_loop
             self.timings.vrs_ready_s[-1] = ready
@@ -423,11 +401,12 @@ class CentreService:
             return
         self.timings.vrs_ready_s.append(ready)
         self.timings.vrs_sent_s.append(sent)
-        stages.append([t_gpst, len(batch), arrival[1] + off - t_gpst if arrival else np.nan,
+        stages.append([t_gpst, sessions, arrival[1] + off - t_gpst if arrival else np.nan,
                        ready, on_loop, sent, *cost[:3], sent - on_loop, cost[3]])
 
-    def _deliver(self, reports, outbox, solve_s: float, sessions: int) -> None:
+    def _deliver(self, msg: EpochsSolved) -> None:
         """The reports of the solved epochs."""
+        reports, outbox, solve_s, sessions = msg.reports, msg.outbox, msg.solve_s, msg.sessions
         done_at = time.time()
         self._gps_minus_unix = gtime.now_gpst() - done_at
         self.timings.solve_s.append(solve_s)
@@ -486,20 +465,25 @@ def _child_main(sock: socket.socket, spec: CentreSpec) -> None:
     limit_blas_threads()
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C: the parent stops us
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    _CentreWorker(sock, spec).run()
+    worker = _CentreWorker(sock, spec)
+    worker.run()
+    if worker.protocol_error is not None:
+        sys.exit(EXIT_PROTOCOL_ERROR)
 
 
 class _Collector:
     """The engine's sink for one session: collects the epoch's bytes for the loop."""
 
-    __slots__ = ("batch", "cid")
+    __slots__ = ("ids", "rtcm", "cid")
 
-    def __init__(self, batch: list, cid: str):
-        self.batch = batch
+    def __init__(self, ids: list[str], rtcm: list[bytes], cid: str):
+        self.ids = ids
+        self.rtcm = rtcm
         self.cid = cid
 
     def __call__(self, data: bytes) -> None:
-        self.batch.append((self.cid, data))
+        self.ids.append(self.cid)
+        self.rtcm.append(data)
 
 
 class _CentreWorker:
@@ -515,25 +499,27 @@ class _CentreWorker:
         self.engine.after_serve = self._flush_vrs  # VRS leave as soon as they exist, before the network solve
         self.engine.serve_group = VRS_GROUP
         gc.freeze()  # the engine's long-lived start-up objects: not scanned by every full collection
-        self.batch: list[tuple[str, bytes]] = []
-        self.buf = bytearray()
+        self.batch_ids: list[str] = []  # the VRS group being collected: client ids and their epoch's bytes
+        self.batch_rtcm: list[bytes] = []
+        self.decoder = Decoder(FROM_LOOP)
         self._inbox: collections.deque = collections.deque()  # commands read, not yet applied
         self._broken = False
+        self.protocol_error: ProtocolError | None = None
         self._last_sent = 0.0
 
-    def send(self, msg) -> None:
+    def send(self, msg: Message) -> None:
         """One message to the loop (the socket's buffer holds an epoch's VRS for thousands of trains, so
         this returns at once while the loop is still reading the previous group)."""
         self._last_sent = time.monotonic()
-        data = pickle.dumps(msg, protocol=5)
+        data = encode(msg)
         try:
-            self.sock.sendall(_HEAD.pack(len(data)) + data)
+            self.sock.sendall(data)
         except OSError:
             self._broken = True  # the loop side is gone
 
     def run(self) -> None:
         try:
-            self.send(("ready", os.getpid()))
+            self.send(Ready(os.getpid()))
             next_tick = next_plan_update = time.monotonic()
             while not self._broken:
                 timeout = 0.0 if self._inbox else max(0.0, next_tick - time.monotonic())
@@ -541,9 +527,9 @@ class _CentreWorker:
                 fed = False  # station data came: an epoch may be complete (moves alone complete none)
                 while self._inbox:
                     cmd = self._inbox.popleft()
-                    if cmd[0] == "stop":
+                    if isinstance(cmd, Stop):
                         return
-                    fed = fed or cmd[0] == "data"
+                    fed = fed or isinstance(cmd, StationData)
                     self._apply(cmd)
                 if fed or time.monotonic() >= next_tick:
                     self._tick()
@@ -553,7 +539,7 @@ class _CentreWorker:
                     self._update_plan()
                     next_plan_update = time.monotonic() + PLAN_UPDATE_S
                 if time.monotonic() - self._last_sent >= HEARTBEAT_S:
-                    self.send(("alive",))
+                    self.send(Alive())
         except OSError:
             return
         finally:
@@ -564,14 +550,21 @@ class _CentreWorker:
         readable, _, _ = select.select([self.sock], [], [], timeout)
         if not readable:
             return False
-        chunk = self.sock.recv(_RECV)
-        if not chunk:
+        with self.decoder.get_buffer(_RECV) as room:
+            nbytes = self.sock.recv_into(room)
+        if not nbytes:
             self._broken = True  # the loop side is gone
-            self._inbox.append(("stop",))
+            self._inbox.append(Stop())
             return True
-        self.buf += chunk
-        for cmds in _split_frames(self.buf):
-            self._inbox.extend(cmds)
+        try:
+            self._inbox.extend(self.decoder.buffer_updated(nbytes))
+        except ProtocolError as exc:  # the stream lost its framing: told to the loop, then this centre exits
+            self._inbox.extend(exc.messages)
+            self._inbox.append(Stop())
+            self.protocol_error = exc
+            log.error("unreadable message from the loop: %s", exc)
+            self.send(CentreError(f"unreadable message from the loop: {exc}"))
+            self._broken = True
         return True
 
     def _await_written(self, t_gpst: float) -> None:
@@ -581,7 +574,8 @@ class _CentreWorker:
         seen = 0
         while not self._broken:
             for i in range(seen, len(self._inbox)):
-                if self._inbox[i][0] == "written" and self._inbox[i][1] == t_gpst:
+                msg = self._inbox[i]
+                if isinstance(msg, VrsWritten) and msg.t_gpst == t_gpst:
                     del self._inbox[i]
                     return
             seen = len(self._inbox)
@@ -589,21 +583,20 @@ class _CentreWorker:
             if left <= 0 or not self._read(left):
                 return
 
-    def _apply(self, cmd: tuple) -> None:
+    def _apply(self, cmd: Message) -> None:
         eng = self.engine
         try:
-            kind = cmd[0]
-            if kind == "data":
-                eng.feed(cmd[1], cmd[2], cmd[3])
-            elif kind == "open":
-                _, cid, lat, lon, h = cmd
-                eng.open_session(cid, lat, lon, h, _Collector(self.batch, cid))
-            elif kind == "move":
-                eng.move_session(*cmd[1:])
-            elif kind == "close":
-                eng.close_session(cmd[1])
+            if isinstance(cmd, StationData):
+                eng.feed(cmd.station, cmd.data, cmd.arrival_unix_s)
+            elif isinstance(cmd, OpenSession):
+                sink = _Collector(self.batch_ids, self.batch_rtcm, cmd.client_id)
+                eng.open_session(cmd.client_id, cmd.lat_deg, cmd.lon_deg, cmd.h_m, sink)
+            elif isinstance(cmd, MoveSession):
+                eng.move_session(cmd.client_id, cmd.lat_deg, cmd.lon_deg, cmd.h_m)
+            elif isinstance(cmd, CloseSession):
+                eng.close_session(cmd.client_id)
         except Exception:  # noqa: BLE001 - bad input never stops the centre: reported, then ignored
-            self._error(f"{cmd[0]} failed")
+            self._error(f"{type(cmd).__name__} failed")
 
     def _update_plan(self) -> None:
         """Sessions opened or moved meanwhile get their place in the next epoch's plan now, between epochs."""
@@ -621,24 +614,25 @@ class _CentreWorker:
             if not reports:
                 return
             solve_s = (time.perf_counter() - t0) / len(reports)
-            slim = [dataclasses.replace(r, vrs=None) for r in reports]
-            self.send(("epoch", slim, eng.drain_outbox(), solve_s, len(eng.sessions)))
+            self.send(EpochsSolved(reports, eng.drain_outbox(), solve_s, len(eng.sessions)))
             eng.prepare_next()  # the next epoch's VRS but for its observations, while waiting for them
         except Exception:  # noqa: BLE001 - the centre keeps serving; the error is counted and logged
-            self.batch.clear()
+            self.batch_ids.clear()
+            self.batch_rtcm.clear()
             self._error("epoch failed")
 
     def _flush_vrs(self, last: bool = True) -> None:
-        if self.batch:
-            batch = list(self.batch)
-            self.batch.clear()  # the collectors hold this list
+        if self.batch_ids:
+            ids, rtcm = list(self.batch_ids), list(self.batch_rtcm)
+            self.batch_ids.clear()  # the collectors hold these lists
+            self.batch_rtcm.clear()
             eng = self.engine
             t = float(eng.serving_t)
-            self.send(("vrs", t, batch, time.time(), eng.serving_arrival, eng.serve_cost_s, last))
+            self.send(VrsGroup(t, ids, rtcm, time.time(), eng.serving_arrival, eng.serve_cost_s, last))
             if last:
                 self._await_written(t)
 
     def _error(self, what: str) -> None:
         text = f"{what}: {traceback.format_exc(limit=8)}"
         log.error("%s", text)
-        self.send(("error", text))
+        self.send(CentreError(text))

@@ -12,6 +12,7 @@ import pytest
 
 from augnet.centre.ingest import StationDecoder
 from augnet.gnss.geometry import ecef_to_geodetic
+from augnet.system.centre_protocol import MoveSession, OpenSession, VrsGroup
 from augnet.system.centre_service import MAX_DELIVERY_S, CentreService, CentreSpec
 from ntrip_caster.gga import GgaFix
 from ntrip_caster.stream_factory import StreamFactory
@@ -104,8 +105,8 @@ def test_bad_input_is_survived_and_a_disabled_station_is_not_fed(recorded):
         await svc.start()
         svc.feed("NOSUCH", b"\xd3\x00\x13garbage")  # unknown station
         svc.feed("WEST", b"\xd3\x03\xff" + bytes(range(256)) * 4)  # garbage in a known station's stream
-        svc._send(("move", "never-opened", 0.0, 0.0, 0.0))
-        svc._send(("open", "bad", "not a latitude", None, None))  # the engine refuses it; the centre goes on
+        svc._send(MoveSession("never-opened", 0.0, 0.0, 0.0))
+        svc._send(OpenSession("bad", "not a latitude", None, None))  # the codec refuses it; the rest goes on
         svc.set_station_enabled("WEST", False)
         await _feed(svc, streams, stations, range(0, 4), 0.05)
         await _until(lambda: len(epochs) >= 3)
@@ -200,17 +201,17 @@ def test_delivering_lasts_from_an_epochs_first_vrs_group_to_its_last(recorded):
             svc.open(cid, "VRS", _fix(check), sink.extend)
         t = world.t0 + 5.0
         assert not svc.delivering()
-        svc._on_message(("vrs", t, [("VRS/1", b"one")], time.time(), None, None, False))
+        svc._on_message(VrsGroup(t, ["VRS/1"], [b"one"], time.time(), None, None, False))
         assert svc.delivering() and got["VRS/1"] == b"one" and not got["VRS/2"]
         await asyncio.sleep(0.01)
         assert written == [] and svc.delivering()
-        svc._on_message(("vrs", t, [("VRS/2", b"two")], time.time(), None, None, True))
+        svc._on_message(VrsGroup(t, ["VRS/2"], [b"two"], time.time(), None, None, True))
         assert not svc.delivering() and got["VRS/2"] == b"two"
         await asyncio.sleep(0.01)
         assert written == [t]
         assert svc.timings.stages[-1][1] == 2  # one epoch of two sessions in the figures
         # an epoch whose last group never comes does not hold the others for ever
-        svc._on_message(("vrs", t + 1.0, [("VRS/1", b"three")], time.time(), None, None, False))
+        svc._on_message(VrsGroup(t + 1.0, ["VRS/1"], [b"three"], time.time(), None, None, False))
         assert svc.delivering()
         svc._delivering_since -= MAX_DELIVERY_S + 0.1  # as if that long had passed
         assert not svc.delivering()
