@@ -77,6 +77,11 @@ class BaselineEpoch:
         return float(self.fixed[count].mean()) if count.any() else 0.0
 
 
+def _code_sigma_m(cfg: BaselineConfig) -> float:
+    """The undifferenced code sigma s, white and multipath together [m]."""
+    return cfg.code_sigma_m * cfg.code_correlation_inflation
+
+
 class BaselineSolver:
     """Integer ambiguities and DD residuals between stations a and b, epoch after epoch."""
 
@@ -170,7 +175,7 @@ class BaselineSolver:
         """The SD code and phase multipath variances [m^2] (their share of sigma^2(el) at both stations)."""
         cfg = self.cfg
         shape = sd.noise_shape()
-        code = cfg.code_multipath_share * (cfg.code_sigma_m * cfg.code_correlation_inflation) ** 2 * shape
+        code = cfg.code_multipath_share * _code_sigma_m(cfg) ** 2 * shape
         return code, cfg.phase_multipath_share * cfg.phase_sigma_m**2 * shape
 
     def _start_states(self, t, sd: SingleDifferences, slips: Slips, mapping, mp_code_var, mp_phase_var) -> None:
@@ -241,7 +246,7 @@ class BaselineSolver:
         vals = np.zeros((4 * m, 8))
         shape = sd.noise_shape()  # SD variance / s^2
         var_phase_sd = (1.0 - cfg.phase_multipath_share) * cfg.phase_sigma_m**2 * shape
-        var_code_sd = (1.0 - cfg.code_multipath_share) * (cfg.code_sigma_m * cfg.code_correlation_inflation) ** 2 * shape
+        var_code_sd = (1.0 - cfg.code_multipath_share) * _code_sigma_m(cfg) ** 2 * shape
         d_wet_a = sd.ga.wet_mapping[rows] - sd.ga.wet_mapping[ref_k[rows]]
         d_wet_b = sd.gb.wet_mapping[rows] - sd.gb.wet_mapping[ref_k[rows]]
         ps, pr = dd_indices(self.state, sd.sats, rows, ref_k, 0)
