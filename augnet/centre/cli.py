@@ -27,9 +27,19 @@ def vrs(
     master: Optional[str] = typer.Option(None, "--master",
                                          help="network master station (default: the most central)"),
     name: str = typer.Option("VRS", "--name", help="marker name of the virtual station"),
+    opt: Optional[List[str]] = typer.Option(None, "--opt", metavar="NAME=VALUE",
+                                            help="a network engine setting (docs/options/centre.md); repeatable"),
 ) -> None:
     """Write a virtual reference station RINEX file for a point from a network's observation files."""
+    from augnet.centre.baseline_config import BaselineConfig
     from augnet.centre.postprocess import PostprocessError, run_vrs
+    from augnet.options import OptionError, with_assignments
+
+    try:
+        config = with_assignments(BaselineConfig(), opt or [])
+    except OptionError as exc:
+        typer.echo(f"error: --opt {exc}", err=True)
+        raise typer.Exit(2)
 
     step = {"next": 0.0}
 
@@ -40,7 +50,7 @@ def vrs(
 
     try:
         result, lines = run_vrs(record, at, out, nav=nav, coords=coords, exclude=exclude or (), master=master,
-                                marker_name=name, progress=progress)
+                                marker_name=name, progress=progress, config=config)
     except PostprocessError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(2)

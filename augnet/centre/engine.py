@@ -18,7 +18,7 @@ from typing import Callable
 
 import numpy as np
 
-from augnet.centre.baseline import BaselineConfig
+from augnet.centre.baseline_config import BaselineConfig
 from augnet.centre.ingest import EpochAligner, StationDecoder
 from augnet.centre.network import NetworkEpoch, NetworkSolver
 from augnet.centre.vrs import VrsEpoch, VrsPlan, synthesize

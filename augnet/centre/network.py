@@ -9,29 +9,29 @@ connected). Each baseline resolves its own ambiguities (`baseline.py`); the netw
 - chains baseline residuals along the shortest path from the master station to every station, after
   re-referencing them to one reference satellite per system, giving DD residuals (dispersive and
   non-dispersive) of every station against the master: the input of the interpolation;
-- hands each baseline, for the next epoch, ionosphere hints for the satellites it has not fixed: the DD
-  ionosphere predicted from the other baselines where they are fixed (a linear model per satellite pair over
-  the network), which separates the wide-lane candidates (0.57-0.8 m of DD ionosphere apart) at once;
-- fits a single-layer ionosphere model over every baseline's fixed satellites (`ionosphere_model`) and hands
-  each baseline its prediction for the satellites not fixed there: the prior of their integer decision.
+- pools the ionosphere's rate and the day's level over every baseline (`ionosphere_prior.py`);
+- hands each baseline, for the next epoch, ionosphere hints for the satellites it has not fixed
+  (`ionosphere_hints.py`) and the prediction of the single-layer ionosphere model fitted over every baseline's
+  fixed satellites (`ionosphere_model.py`): the prior of their integer decision.
 """
 
 from __future__ import annotations
 
 import heapq
 import itertools
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from augnet.centre.baseline import (BaselineConfig, BaselineEpoch, BaselineSolver, day_ionosphere_ppm,
-                                   rms_upper_bound_factor)
+from augnet.centre.baseline import BaselineEpoch, BaselineSolver
+from augnet.centre.baseline_config import BaselineConfig
+from augnet.centre.ionosphere_hints import IonosphereHints
+from augnet.centre.ionosphere_model import IonosphereModel, ionosphere_model, model_predictions
+from augnet.centre.ionosphere_prior import share_network_ionosphere
 from augnet.centre.integrity import Alarm, IntegrityMonitor
 from augnet.centre.observations import StationEpoch
 from augnet.centre.satellite_geometry import SatelliteGeometry, satellite_geometry
 from augnet.gnss.ephemeris import NavigationData
-from augnet.gnss.ionosphere import IONO_K_M3_S2, SHELL_HEIGHT_M, thin_shell_mapping
 from augnet.gnss.geometry import ecef_to_enu
 
 NEIGHBOURS_PER_STATION = 2
@@ -91,6 +91,9 @@ class NetworkEpoch:
 
 
 class NetworkSolver:
+    """The network engine: every baseline's solver, their closures, the ionosphere they share, and the DD
+    residuals of every station against the master."""
+
     def __init__(self, stations: dict[str, np.ndarray], master: str | None = None,
                  config: BaselineConfig | None = None, edges: list[tuple[str, str]] | None = None):
         self.names = list(stations)
@@ -109,14 +112,7 @@ class NetworkSolver:
         m = self.names.index(self.master)
         self.order = [m] + [i for i in range(len(self.names)) if i != m]
         self.en = ecef_to_enu(self.xyz - self.xyz[m], self.xyz[m])[:, :2]
-        # baseline vectors (b minus a, east/north) and, per baseline, the others near enough to lend it their
-        # ionosphere
-        self._dx = {e: self.en[e[1]] - self.en[e[0]] for e in idx_edges}
-        self._len = {e: float(np.linalg.norm(v)) for e, v in self._dx.items()}
-        mid = {e: 0.5 * (self.en[e[0]] + self.en[e[1]]) for e in idx_edges}
-        far = self.cfg.iono_hint_max_distance_km * 1e3
-        self._near = {t: [(e, float(np.linalg.norm(mid[e] - mid[t]))) for e in idx_edges
-                          if e != t and np.linalg.norm(mid[e] - mid[t]) <= far] for t in idx_edges}
+        self.ionosphere_hints = IonosphereHints(idx_edges, self.en, self.cfg)
         self._hints: dict[tuple[int, int], dict] = {}
         self._model_hints: dict[tuple[int, int], dict] = {}
         self.iono_model: IonosphereModel | None = None
@@ -128,16 +124,39 @@ class NetworkSolver:
         return self.names[int(np.argmin(np.linalg.norm(self.xyz - c, axis=1)))]
 
     def update(self, epochs: dict[str, StationEpoch], nav: NavigationData) -> NetworkEpoch:
+        """One epoch of every station (None or absent: no data)."""
         present = {n for n, e in epochs.items() if e is not None and len(e.sats) and n in self.clocks}
-        results: dict[tuple[int, int], BaselineEpoch | None] = {}
         t = next(iter(epochs[n].t_gpst for n in present)) if present else float("nan")
+        geom = self._geometry(epochs, present, nav)
+        excluded = self.integrity.observe(t, {n: epochs[n] for n in present}, geom) if present else set()
+        results = self._solve_baselines(epochs, present, nav, geom, excluded)
+        misclosures = self._check_closures(results)
+        self._share_ionosphere(results)
+        refs = self._network_refs(results)
+        sats = np.array(sorted({str(s) for r in results.values() if r is not None for s in r.sats}))
+        iono, trop = self._chain_to_master(results, refs, sats)
+        rows = self.order
+        return NetworkEpoch(
+            t_gpst=t, master=self.master, stations=[self.names[i] for i in rows], station_en_m=self.en[rows],
+            station_xyz_m=self.xyz[rows], refs=refs, sats=sats, dd_iono_m=iono[rows], dd_trop_m=trop[rows],
+            baselines={self.solvers[e].name: r for e, r in results.items()}, misclosures=misclosures,
+            present=sorted(present), clocks=dict(self.clocks), excluded=set(excluded),
+            alarms=self.integrity.drain())
+
+    def _geometry(self, epochs, present, nav) -> dict[str, SatelliteGeometry]:
+        """Each present station's satellite geometry, computed once for all its baselines; the receiver clocks are
+        kept as the next epoch's starting guess."""
         geom: dict[str, SatelliteGeometry] = {}
         pos = {n: i for i, n in enumerate(self.names)}
         for n in present:
             ep = epochs[n]
             geom[n] = satellite_geometry(ep.sats, ep.t_gpst, self.xyz[pos[n]], nav, ep.code_m[:, 0], self.clocks[n])
             self.clocks[n] = geom[n].clock_s
-        excluded = self.integrity.observe(t, {n: epochs[n] for n in present}, geom) if present else set()
+        return geom
+
+    def _solve_baselines(self, epochs, present, nav, geom, excluded) -> dict[tuple[int, int], BaselineEpoch | None]:
+        """Each baseline whose two stations have data, with the hints and model predictions of the last epoch."""
+        results: dict[tuple[int, int], BaselineEpoch | None] = {}
         for (i, j), solver in self.solvers.items():
             a, b = self.names[i], self.names[j]
             if a in present and b in present:
@@ -145,13 +164,22 @@ class NetworkSolver:
                                                 self._hints.get((i, j)), self._model_hints.get((i, j)))
             else:
                 results[(i, j)] = None
-        misclosures = self._check_closures(results)
-        self._share_day_ionosphere()
-        self._hints = self._iono_hints(results)
-        self.iono_model = ionosphere_model(results, self._len, self.cfg)
-        self._model_hints = self._model_predictions(results)
-        refs = self._network_refs(results)
-        sats = np.array(sorted({str(s) for r in results.values() if r is not None for s in r.sats}))
+        return results
+
+    def _share_ionosphere(self, results) -> None:
+        """The rate and day's level pooled over the baselines, and, for the next epoch, the hints and the
+        single-layer model's predictions."""
+        priors = {e: solver.ionosphere for e, solver in self.solvers.items()}
+        share_network_ionosphere(list(priors.values()), self.cfg)
+        self._hints = self.ionosphere_hints.predict(results, priors)
+        self.iono_model = ionosphere_model(results, self.ionosphere_hints.length, self.cfg)
+        self._model_hints = model_predictions(self.iono_model, results, self.ionosphere_hints.length)
+
+    def _chain_to_master(self, results, refs, sats) -> tuple[np.ndarray, np.ndarray]:
+        """(n, S) DD ionosphere and non-dispersive residuals of every station (in `self.names` order) against the
+        master, chained over baselines: per satellite, along the shortest path (in metres) on which that satellite
+        is fixed on every baseline. Edges are relaxed in order of length, so a short path wins over a long one; a
+        satellite missing on one baseline reaches the station over another."""
         n = len(self.names)
         iono = np.full((n, len(sats)), np.nan)
         trop = np.full((n, len(sats)), np.nan)
@@ -160,10 +188,6 @@ class NetworkSolver:
         m = self.order[0]
         iono[m] = 0.0
         trop[m] = 0.0
-        # Residuals of every station against the master, chained over baselines: per satellite, along the
-        # shortest path (in metres) on which that satellite is fixed on every baseline. Edges are relaxed in
-        # order of length, so a short path wins over a long one; a satellite missing on one baseline
-        # reaches the station over another.
         edges = sorted((self.solvers[e].length_m, e) for e, v in per_edge.items() if v is not None)
         dist = np.full((n, len(sats)), np.inf)
         dist[m] = 0.0
@@ -181,133 +205,7 @@ class NetworkSolver:
                         changed = True
             if not changed:
                 break
-        rows = self.order
-        return NetworkEpoch(
-            t_gpst=t, master=self.master, stations=[self.names[i] for i in rows], station_en_m=self.en[rows],
-            station_xyz_m=self.xyz[rows], refs=refs, sats=sats, dd_iono_m=iono[rows], dd_trop_m=trop[rows],
-            baselines={self.solvers[e].name: r for e, r in results.items()}, misclosures=misclosures,
-            present=sorted(present), clocks=dict(self.clocks), excluded=set(excluded),
-            alarms=self.integrity.drain())
-
-    def _share_day_ionosphere(self) -> None:
-        """The ionosphere's measured rate (mean over the baselines) and the day's level from every baseline's fixed
-        satellites at once (in ppm of each baseline's length), handed to every baseline: a network of four
-        baselines with three satellites fixed on each knows the day's level after the first fixes, where one
-        baseline alone would wait for more."""
-        rates = [s.iono_rate_ppm_sqrt_s for s in self.solvers.values() if s.iono_rate_ppm_sqrt_s is not None]
-        for s in self.solvers.values():
-            s.iono_rate_network = float(np.mean(rates)) if rates else None
-        q = np.concatenate([s.iono_day_q for s in self.solvers.values()])
-        level = day_ionosphere_ppm(float(np.sqrt(np.mean(q**2))) if q.size else math.nan, q.size, self.cfg)
-        if level is None:
-            return
-        for s in self.solvers.values():
-            # the network's level is kept until a lower one is well established (an epoch with few fixes does
-            # not reset it), and follows a higher one at once
-            prev = s.iono_day_network
-            s.iono_day_network = level if prev is None or level > prev or q.size >= 2 * self.cfg.iono_day_min_sats \
-                else prev
-
-    def _iono_hints(self, results) -> dict[tuple[int, int], dict[str, tuple[str, float, float]]]:
-        """For each baseline and satellite not fixed there: the DD ionosphere (against the baseline's reference)
-        predicted from the other baselines where both are fixed, with a linear model per satellite pair (DD
-        ionosphere = gradient . baseline vector; the gradient fitted by weighted least squares, each source
-        weighted by the model error at its distance). A satellite fixed on one baseline thus helps the parallel
-        ones at once, and two non-parallel ones help every baseline around them. Used for the next epoch."""
-        cfg = self.cfg
-        if not cfg.iono_hints:
-            return {}
-        shell = cfg.iono_shell_height_km or 350.0
-        rr = 6371.0 / (6371.0 + shell)
-        info = {e: (r, {str(s): k for k, s in enumerate(r.sats)}) for e, r in results.items() if r is not None}
-        hints: dict[tuple[int, int], dict[str, tuple[str, float, float]]] = {}
-        for t, (rt, post) in info.items():
-            need = ~rt.fixed & (rt.eligible if rt.eligible is not None else True)
-            if not need.any():
-                continue
-            dxt = self._dx[t]
-            lt = self._len[t]
-            # the hint's error model is the quiet day's: scaled up with the day's level where it is higher
-            activity = max(1.0, self.solvers[t].iono_level_ppm / cfg.iono_prior_ppm)
-            el = np.radians(np.minimum(rt.elevation_a_deg, rt.elevation_b_deg))
-            mapping = 1.0 / np.sqrt(1.0 - (rr * np.cos(el)) ** 2)
-            out = {}
-            for k in np.flatnonzero(need):
-                s = str(rt.sats[k])
-                ref = rt.refs.get(s[0])
-                kr = post.get(ref)
-                if kr is None or s == ref:
-                    continue
-                meff = math.hypot(mapping[k], mapping[kr])
-                lam = np.eye(2) / (10.0 * cfg.iono_prior_ppm * 1e-6 * meff) ** 2  # weak prior on the gradient
-                vec = np.zeros(2)
-                used = 0
-                for e, dist in self._near[t]:
-                    src = info.get(e)
-                    if src is None:
-                        continue
-                    re, pe = src
-                    ks, kq = pe.get(s), pe.get(ref)
-                    if ks is None or kq is None:
-                        continue
-                    dxe = self._dx[e]
-                    var = (cfg.iono_hint_ppm_per_100km * activity * 1e-6 * max(dist, 0.5 * lt) / 1e5 * self._len[e]
-                           * meff) ** 2
-                    if re.fixed[ks] and re.fixed[kq]:
-                        y = re.dd_iono_m[ks] - re.dd_iono_m[kq]
-                    elif (cfg.iono_hints_float and re.iono_float_m is not None and re.refs.get(s[0]) == ref
-                          and not set(e) & set(t)):
-                        # not fixed there either: the float estimate of a baseline with no station in common
-                        # (independent multipath and noise), less its prior (which this baseline has too): in
-                        # information form, data = posterior - prior
-                        vp = self.solvers[e].iono_state_prior_dd(s, ref)
-                        v = float(re.iono_float_var_m2[ks])
-                        if not v < 0.8 * vp:
-                            continue
-                        y = float(re.iono_float_m[ks]) * vp / (vp - v)
-                        var += v * vp / (vp - v)
-                    else:
-                        continue
-                    if not np.isfinite(y):
-                        continue
-                    lam += np.outer(dxe, dxe) / var
-                    vec += dxe * y / var
-                    used += 1
-                if not used:
-                    continue
-                cov = np.linalg.inv(lam)
-                var = float(dxt @ cov @ dxt)
-                # only where it says more than the baseline's own prior
-                prior_dd = self.solvers[t].iono_level_ppm * 1e-6 * lt * meff
-                if var < prior_dd**2:
-                    out[s] = (ref, float(dxt @ cov @ vec), var)
-            if out:
-                hints[t] = out
-        return hints
-
-    def _model_predictions(self, results) -> dict[tuple[int, int], dict[str, tuple[str, float, float]]]:
-        """Per baseline, the ionosphere model's DD ionosphere [m] and its variance [m^2] for the satellites high
-        enough to be fixed and not fixed yet (against the baseline's reference). Used for the next epoch."""
-        model = self.iono_model
-        if model is None:
-            return {}
-        out = {}
-        for e, r in results.items():
-            if r is None:
-                continue
-            need = ~r.fixed & (r.eligible if r.eligible is not None else True)
-            if not need.any():
-                continue
-            mean, var = model.predict(r, self._len[e])
-            pos = {str(s): k for k, s in enumerate(r.sats)}
-            hints = {}
-            for k in np.flatnonzero(need & np.isfinite(mean)):
-                s = str(r.sats[k])
-                ref = r.refs.get(s[0])
-                if ref in pos and ref != s:
-                    hints[s] = (ref, float(mean[k]), float(var[k]))
-            out[e] = hints
-        return out
+        return iono, trop
 
     def _network_refs(self, results) -> dict[str, str]:
         """Per system, the satellite fixed on the most baselines (ties: the first baseline's reference)."""
@@ -368,82 +266,3 @@ class NetworkSolver:
                             r.dd_iono_m[q] = np.nan
                             r.dd_trop_m[q] = np.nan
         return bad
-
-
-
-@dataclass(frozen=True)
-class IonosphereModel:
-    """The network's single-layer ionosphere model of the DD ionosphere: a vertical TEC `vtec_tecu` on a shell at
-    `iono_shell_height_km`, which a satellite's DD ionosphere holds through the difference of the two stations'
-    mapping functions (b minus a, satellite minus reference; a 50 km baseline across the satellite's azimuth
-    changes its elevation by ~0.45 degree, at 15 degrees the mapping function by ~1 %: 0.5 TECU, 8 cm on L1, of
-    17 TECU), plus a residual (the TEC's gradients between the pierce points) of `level_ppm` [ppm of the
-    baseline length, vertical, mapped with hypot(M_s, M_ref) like the day's level]: the 95 % upper bound of the
-    fit's residual RMS times `iono_prior_adapt`, never below `iono_model_floor_ppm`."""
-
-    vtec_tecu: float
-    vtec_var_tecu2: float
-    level_ppm: float
-    n: int  # fixed DD ionospheres it was fitted on
-    shell_km: float
-
-    def predict(self, r: BaselineEpoch, length_m: float) -> tuple[np.ndarray, np.ndarray]:
-        """A baseline's DD ionosphere on f1 [m] and its variance [m^2] for each of its satellites against its
-        reference (NaN where the system has no reference)."""
-        d, m, mr = _mapping_terms(r, self.shell_km)
-        tecu_m = IONO_K_M3_S2 / r.freq_hz[:, 0] ** 2  # metres of f1 delay per TECU
-        mean = d * self.vtec_tecu * tecu_m
-        spread = self.level_ppm * 1e-6 * length_m * np.hypot(m, mr)
-        return mean, spread**2 + (d * tecu_m) ** 2 * self.vtec_var_tecu2
-
-
-def _mapping_terms(r: BaselineEpoch, shell_km: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per satellite of a baseline epoch: the DD of the stations' mapping functions (b - a, satellite - its
-    reference; NaN without a reference), and the mapping function at the lower station of the satellite and of
-    its reference (the scale of the day's level)."""
-    ma = thin_shell_mapping(np.radians(r.elevation_a_deg), 1e3 * shell_km)
-    mb = thin_shell_mapping(np.radians(r.elevation_b_deg), 1e3 * shell_km)
-    low = np.maximum(ma, mb)
-    pos = {str(s): k for k, s in enumerate(r.sats)}
-    kr = np.array([pos.get(r.refs.get(str(s)[0]), -1) for s in r.sats])
-    has = kr >= 0
-    kr = np.where(has, kr, 0)
-    sd = mb - ma
-    return np.where(has, sd - sd[kr], np.nan), low, np.where(has, low[kr], np.nan)
-
-
-def ionosphere_model(results: dict, lengths: dict, cfg: BaselineConfig) -> IonosphereModel | None:
-    """Fit the vertical TEC of the single-layer model over every baseline's fixed satellites by weighted least
-    squares (each DD ionosphere weighted by the day level's scale, L * hypot(M_s, M_ref)); the residual's level
-    in ppm. None without `iono_model_min_dd` fixed DD ionospheres, or when the model is off."""
-    if cfg.iono_model_floor_ppm <= 0:
-        return None
-    shell = cfg.iono_shell_height_km or SHELL_HEIGHT_M / 1e3  # the filter's default where the config has none
-    ys, ds, ss = [], [], []
-    for e, r in results.items():
-        if r is None:
-            continue
-        fixed = r.fixed & ~r.is_reference() & np.isfinite(r.dd_iono_m)
-        if not fixed.any():
-            continue
-        d, m, mr = _mapping_terms(r, shell)
-        tecu_m = IONO_K_M3_S2 / r.freq_hz[:, 0] ** 2
-        scale = 1e-6 * lengths[e] * np.hypot(m, mr) / tecu_m  # TECU per ppm
-        ok = fixed & np.isfinite(d)
-        ys.append(r.dd_iono_m[ok] / tecu_m[ok])
-        ds.append(d[ok])
-        ss.append(scale[ok])
-    if not ys:
-        return None
-    y, d, s = np.concatenate(ys), np.concatenate(ds), np.concatenate(ss)
-    n = y.size
-    if n < max(cfg.iono_model_min_dd, 2):
-        return None
-    a = d / s
-    info = float(a @ a)
-    if not info > 0:
-        return None
-    v = float(a @ (y / s)) / info
-    rms = math.sqrt(float(np.sum((y / s - a * v) ** 2)) / (n - 1))
-    level = max(cfg.iono_model_floor_ppm, cfg.iono_prior_adapt * rms * rms_upper_bound_factor(n - 1))
-    return IonosphereModel(vtec_tecu=v, vtec_var_tecu2=level**2 / info, level_ppm=level, n=n, shell_km=shell)

@@ -41,6 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
+from augnet.centre.baseline_config import BaselineConfig
 from augnet.centre.network import NetworkSolver
 from augnet.centre.observations import StationEpoch, from_obsdata
 from augnet.centre.vrs import geometry_many, synthesize
@@ -369,14 +370,16 @@ def single_base_epoch(master: StationEpoch, master_xyz_m, point_ecef_m, nav: Nav
     return ep.subset(use)
 
 
-def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress=None) -> VrsResult:
-    """Solve the network epoch by epoch and synthesise the VRS at the point."""
+def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress=None,
+            config: BaselineConfig | None = None) -> VrsResult:
+    """Solve the network epoch by epoch (with the engine's settings `config`, default when None) and synthesise
+    the VRS at the point."""
     t_wall = time.perf_counter()
     point = np.asarray(point_ecef_m, float).reshape(1, 3)
     stations = {s.name: s.xyz_m for s in inp.stations}
     if master is not None and master not in stations:
         raise PostprocessError(f"--master {master}: not one of the stations ({', '.join(stations)})")
-    net = NetworkSolver(stations, master=master)
+    net = NetworkSolver(stations, master=master, config=config)
     times, rows = align_epochs(inp.stations)
     by_name = {s.name: s for s in inp.stations}
     summaries = {s.name: BaselineSummary(s.name, s.length_m / 1e3) for s in net.solvers.values()}
@@ -582,10 +585,10 @@ def summary_lines(result: VrsResult) -> list[str]:
 
 def run_vrs(record: str | os.PathLike, at: str, out: str | os.PathLike, nav=None, coords=None,
             exclude=(), master: str | None = None, marker_name: str = VRS_MARKER_NAME,
-            progress=None) -> tuple[VrsResult, list[str]]:
+            progress=None, config: BaselineConfig | None = None) -> tuple[VrsResult, list[str]]:
     """The whole post-processing: read, solve, synthesise, write. Returns the result and its summary."""
     point = parse_point(at)
     inp = load_network(record, nav=nav, coords=coords, exclude=tuple(exclude))
-    result = process(inp, point, master=master, progress=progress)
+    result = process(inp, point, master=master, progress=progress, config=config)
     write_vrs(result, out, marker_name)
     return result, summary_lines(result)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from augnet.centre.baseline_state import N1
 from augnet.centre.network import NetworkSolver
 from stations.scenario import load_scenario
 from stations.world import World
@@ -36,11 +37,12 @@ def normalized_errors():
                     ref = res.refs[s[0]]
                     if s == ref or res.fixed[k] or not res.eligible[k]:
                         continue
-                    d = np.zeros(len(sv.x))  # the wide lane N1 - N2 of the DD (s - ref)
-                    d[[sv.index[s] + 1, sv.index[ref] + 2]] = 1.0
-                    d[[sv.index[s] + 2, sv.index[ref] + 1]] = -1.0
+                    st = sv.state
+                    d = np.zeros(len(st.x))  # the wide lane N1 - N2 of the DD (s - ref)
+                    d[[st.index(s) + N1, st.index(ref) + N1 + 1]] = 1.0
+                    d[[st.index(s) + N1 + 1, st.index(ref) + N1]] = -1.0
                     n = truth_dd_ambiguity(world, blk, e, ra, rb, s, ref)
-                    z.append((d @ sv.x - (n[0] - n[1])) / np.sqrt(d @ sv.P @ d))
+                    z.append((d @ st.x - (n[0] - n[1])) / np.sqrt(d @ st.P @ d))
     return np.array(z)
 
 

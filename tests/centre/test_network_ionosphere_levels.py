@@ -58,7 +58,7 @@ def _cold_start(level: str, duration_s: int = DURATION_S) -> dict:
                 checked += k.size
                 for i in np.flatnonzero(~(truth == res.dd_n[k]).all(axis=1)):
                     wrong.add((solver.name, str(res.sats[k[i]])))
-    levels = {s.name: s.iono_day_ppm for s in net.solvers.values()}
+    levels = {s.name: s.ionosphere.day_ppm for s in net.solvers.values()}
     return dict(checked=checked, wrong=sorted(wrong), fraction=fraction, day_ppm=levels)
 
 

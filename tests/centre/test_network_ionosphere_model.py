@@ -7,8 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from augnet.centre.baseline import BaselineConfig, BaselineEpoch
-from augnet.centre.network import ionosphere_model
+from augnet.centre.baseline import BaselineEpoch
+from augnet.centre.baseline_config import BaselineConfig
+from augnet.centre.ionosphere_model import ionosphere_model
 from augnet.gnss.ionosphere import IONO_K_M3_S2, thin_shell_mapping
 
 F1_HZ = 1575.42e6
@@ -108,14 +109,16 @@ def test_the_level_is_never_below_the_floor(floor):
 def test_the_models_prediction_becomes_the_prior_the_state_would_have_started_with():
     """The prior enters the integer decision as a pseudo-observation beside the state's own wide prior (zero mean):
     together they must give the model's mean and variance, and a network hint must then count as independent data."""
-    from augnet.centre.baseline import BaselineSolver
+    from augnet.centre.fixed_integers import FixedIntegers
+    from augnet.centre.ionosphere_prior import IonospherePrior
 
-    solver = BaselineSolver("A", [0.0, 0.0, 6.371e6], "B", [LENGTH_M, 0.0, 6.371e6])
+    prior = IonospherePrior(BaselineConfig(), LENGTH_M)
+    none_fixed = FixedIntegers()
     sats, rows, ref_k, mapping = np.array(["G01", "G02"]), np.array([1]), np.array([0, 0]), np.array([1.0, 2.5])
-    solver._iono_p0 = {"G01": 0.04, "G02": 0.25}  # the states' own priors [m^2]
-    state_var = solver.iono_state_prior_dd("G02", "G01")
+    prior._state_prior = {"G01": 0.04, "G02": 0.25}  # the states' own priors [m^2]
+    state_var = prior.state_prior_dd("G02", "G01")
     mean, var = 0.08, 0.004  # the model's DD ionosphere [m] and variance [m^2], far tighter than the day's
-    out = solver._prior_hints(sats, rows, ref_k, mapping, None, {"G02": ("G01", mean, var)})
+    out = prior.pseudo_observations(sats, rows, ref_k, mapping, none_fixed, None, {"G02": ("G01", mean, var)})
     ref, z, v = out["G02"]
     assert ref == "G01"
     post_var = 1.0 / (1.0 / state_var + 1.0 / v)
@@ -123,11 +126,11 @@ def test_the_models_prediction_becomes_the_prior_the_state_would_have_started_wi
     assert post_var * z / v == pytest.approx(mean)
     # a network hint beside it: the posterior is the model's prior updated with the hint
     hint = ("G01", 0.02, 0.002)
-    ref, z2, v2 = solver._prior_hints(sats, rows, ref_k, mapping, {"G02": hint},
-                                      {"G02": ("G01", mean, var)})["G02"]
+    ref, z2, v2 = prior.pseudo_observations(sats, rows, ref_k, mapping, none_fixed, {"G02": hint},
+                                           {"G02": ("G01", mean, var)})["G02"]
     post_var = 1.0 / (1.0 / state_var + 1.0 / v2)
     assert post_var == pytest.approx(1.0 / (1.0 / var + 1.0 / hint[2]))
     assert post_var * z2 / v2 == pytest.approx(post_var * (mean / var + hint[1] / hint[2]))
     # a model no tighter than the day's prior is not used: the day's zero-mean prior stays
-    loose = solver._prior_hints(sats, rows, ref_k, mapping, None, {"G02": ("G01", mean, 0.2)})
+    loose = prior.pseudo_observations(sats, rows, ref_k, mapping, none_fixed, None, {"G02": ("G01", mean, 0.2)})
     assert loose["G02"][1] == 0.0

@@ -148,8 +148,8 @@ def baseline_solvers(network) -> dict:
 def fixed_tables(solver) -> dict[str, dict[str, int]]:
     """A baseline's fixed DD integers against its references: N1, N2 and the wide lane N1 - N2 held on its
     own (satellite -> cycles)."""
-    n1, n2, wl = solver.fixed
-    return {"N1": dict(n1), "N2": dict(n2), "WL": dict(wl)}
+    f = solver.fixed
+    return {"N1": dict(f.n1), "N2": dict(f.n2), "WL": dict(f.wide_lane)}
 
 
 def baseline_refs(solver) -> dict[str, str]:

@@ -1,0 +1,42 @@
+"""The network engine's settings table: the committed reference page is the generated one, and `augnet vrs --opt`
+reads the table."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from augnet.centre.baseline_config import BaselineConfig, options_page
+from augnet.options import OptionError, table, with_assignments
+
+PAGE = Path(__file__).resolve().parents[2] / "docs" / "options" / "centre.md"
+
+
+def test_the_committed_page_is_the_generated_one():
+    assert PAGE.read_text() == options_page(), \
+        "regenerate: python -m augnet.centre.baseline_config > docs/options/centre.md"
+
+
+def test_every_setting_is_documented():
+    rows = table(BaselineConfig)
+    assert [r.name for r in rows] == list(BaselineConfig.__dataclass_fields__)
+    assert all(r.doc for r in rows)
+
+
+def test_assignments_reach_the_settings():
+    cfg = with_assignments(BaselineConfig(), ["fix_ratio=3", "iono-shell-height-km=none", "iono_hints=off"])
+    assert (cfg.fix_ratio, cfg.iono_shell_height_km, cfg.iono_hints) == (3.0, None, False)
+    with pytest.raises(OptionError, match="fix_ratio"):
+        with_assignments(BaselineConfig(), ["fix_ratio=x"])
+
+
+def test_vrs_rejects_an_unknown_setting_by_name(tmp_path):
+    from augnet.cli import _mount, app
+
+    _mount()
+    out = CliRunner().invoke(app, ["vrs", "--record", str(tmp_path), "--at", "0,0,0", "--out",
+                                   str(tmp_path / "v.rnx"), "--opt", "no_such_setting=1"])
+    assert out.exit_code == 2
+    assert "no_such_setting" in out.stderr
