@@ -149,6 +149,8 @@ def markdown(cls, title: str) -> str:
 # The generated reference pages: (page name under docs/options/, module, settings class, title).
 PAGES = (
     ("rtk", "augnet.onboard.rtk", "RtkOptions", "Onboard RTK settings (`augnet rtk --opt NAME=VALUE`)"),
+    ("centre", "augnet.centre.baseline_config", "BaselineConfig",
+     "Network engine settings (`augnet vrs --opt NAME=VALUE`)"),
 )
 
 

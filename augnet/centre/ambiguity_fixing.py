@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from augnet.centre.baseline_config import BaselineConfig
+from augnet.centre.baseline_config import BaselineConfig, fix_policy
 from augnet.centre.baseline_state import IONO, N1, ZWD_A, ZWD_B, dd_indices
 from augnet.centre.fix_confirmation import FixConfirmation
 from augnet.centre.fixed_integers import ALL_TABLES, FREQUENCY_TABLES, WIDE_LANE, FixedIntegers
@@ -192,7 +192,7 @@ class BaselineAmbiguities:
             a_hat, Q = self._with_pseudo_observations(state, sats, rows, ref_k, pseudo_obs, cands, ia, ib, a_hat, Q)
         T, where = wide_lane_transform(cands)
         try:
-            fix = partial_fix(T @ a_hat, T @ Q @ T.T, cfg.fix_min_success_rate, cfg.fix_ratio, min_count)
+            fix = partial_fix(T @ a_hat, T @ Q @ T.T, fix_policy(cfg, min_count))
         except AmbiguityError:
             fix = None
         pins = self._pinned(sats, cands, where, a_hat, Q, T, fix) if fix is not None else {}

@@ -10,9 +10,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from augnet.options import markdown, setting
-
-OPTIONS_PAGE_TITLE = "Network engine settings (`augnet vrs --opt NAME=VALUE`)"
+from augnet.gnss.ambiguity import FixPolicy
+from augnet.options import setting
 
 _NRTK = "network-rtk.md"
 _SIM = "network-70km simulation, docs/decisions"
@@ -140,12 +139,7 @@ class BaselineConfig:
         "split carries ~2x the phase noise, the DD ionosphere moves by mm per minute; 0: none")
 
 
-def options_page() -> str:
-    """The reference page `docs/options/centre.md`."""
-    return markdown(BaselineConfig, OPTIONS_PAGE_TITLE)
-
-
-if __name__ == "__main__":  # run as a script the table's module would be __main__: import it by its name
-    from augnet.centre import baseline_config
-
-    print(baseline_config.options_page(), end="")
+def fix_policy(cfg: BaselineConfig, min_count: int) -> FixPolicy:
+    """The baseline filter's ambiguity-fixing policy: the settings' thresholds, every qualifying block searched
+    (no bound) and no biased-float screening (the ionosphere pseudo-observations keep its floats unbiased)."""
+    return FixPolicy(min_success_rate=cfg.fix_min_success_rate, ratio_threshold=cfg.fix_ratio, min_count=min_count)

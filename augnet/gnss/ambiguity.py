@@ -395,26 +395,14 @@ class FixPolicy:
     biased_float_rms_cyc: float = BIASED_FLOAT_RMS_CYC
 
 
-def partial_fix(
-    a_hat: np.ndarray,
-    Q: np.ndarray,
-    policy: FixPolicy | float | None = None,
-    ratio_threshold: float | None = None,
-    min_count: int | None = None,
-    min_success_rate: float | None = None,
-) -> PartialFix | None:
-    """Partial ambiguity resolution (Teunissen et al. 1999) under `policy` (a `FixPolicy`; None: the
-    defaults): fix the largest trailing block of the decorrelated ambiguities whose bootstrapped success
+def partial_fix(a_hat: np.ndarray, Q: np.ndarray, policy: FixPolicy = FixPolicy()) -> PartialFix | None:
+    """Partial ambiguity resolution (Teunissen et al. 1999) under `policy` (default: `FixPolicy()`): fix the largest trailing block of the decorrelated ambiguities whose bootstrapped success
     rate reaches the policy's minimum and whose integer solution passes the ratio test.  In the L^T D L
     ordering the trailing block is self-contained (its own factors are the trailing block of L and D), so
     it is searched on its own; a failing ratio on a block with a high success rate means the float
     solution disagrees with its covariance, so smaller blocks, without the worst-determined parts, are
     tried next.  None when nothing can be fixed.
-
-    The form `partial_fix(a_hat, Q, min_success_rate, ratio_threshold, min_count)` (positional or by
-    keyword) is the policy FixPolicy(min_success_rate, ratio_threshold, min_count).
     """
-    policy = _policy(policy, ratio_threshold, min_count, min_success_rate)
     a_hat = np.asarray(a_hat, dtype=float)
     n = a_hat.shape[0]
     if n < max(policy.min_count, 1):
@@ -433,20 +421,6 @@ def partial_fix(
         if ratio >= policy.ratio_threshold:
             return PartialFix(Zs=Z[:, start:], z_fixed=cand[0], ratio=ratio, success_rate=float(trailing[start]))
     return None
-
-
-def _policy(policy, ratio_threshold, min_count, min_success_rate) -> FixPolicy:
-    """The FixPolicy of `partial_fix`'s arguments (a policy, or the three numbers of the older form)."""
-    if isinstance(policy, FixPolicy):
-        if ratio_threshold is not None or min_count is not None or min_success_rate is not None:
-            raise TypeError("give either a FixPolicy or min_success_rate, ratio_threshold, min_count")
-        return policy
-    if policy is not None and min_success_rate is not None:
-        raise TypeError("min_success_rate given twice")
-    rate = policy if policy is not None else min_success_rate
-    return FixPolicy(min_success_rate=DEFAULT_MIN_SUCCESS_RATE if rate is None else float(rate),
-                     ratio_threshold=DEFAULT_RATIO_THRESHOLD if ratio_threshold is None else float(ratio_threshold),
-                     min_count=DEFAULT_MIN_COUNT if min_count is None else int(min_count))
 
 
 def trailing_success_rates(D: np.ndarray) -> np.ndarray:

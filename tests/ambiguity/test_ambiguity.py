@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 from augnet.gnss.ambiguity import (
     AmbiguityError,
+    FixPolicy,
     bootstrap_success_rate,
     condition_on_fixed,
     lambda_search,
@@ -110,7 +111,7 @@ def test_partial_fix_leaves_out_the_poorly_determined_part():
     truth = rng.integers(-100, 100, size=n).astype(float)
     a_hat = truth + rng.normal(scale=sig)
     assert lambda_search(a_hat, Q).success_rate < 0.5
-    fix = partial_fix(a_hat, Q, min_success_rate=0.999, ratio_threshold=3.0)
+    fix = partial_fix(a_hat, Q, FixPolicy(min_success_rate=0.999, ratio_threshold=3.0))
     assert fix is not None and fix.count == 7
     np.testing.assert_array_equal(fix.z_fixed, fix.Zs.T @ truth)
     # conditioning the state on the fix pins the fixed ambiguities to their integers
@@ -175,22 +176,6 @@ def test_both_factorisations_refuse_what_is_not_positive_definite():
         for factor in (ldl, ldl_reference):
             with pytest.raises(AmbiguityError):
                 factor(bad)
-
-
-def test_the_old_positional_call_is_the_policy_it_names():
-    from augnet.gnss.ambiguity import FixPolicy
-
-    rng = np.random.default_rng(11)
-    Q = random_covariance(rng, 8, max_cond=1e3) * 1e-2
-    a_hat = rng.integers(-50, 50, size=8) + rng.normal(scale=0.05, size=8)
-    old = partial_fix(a_hat, Q, 0.99, 2.0, 5)
-    new = partial_fix(a_hat, Q, FixPolicy(min_success_rate=0.99, ratio_threshold=2.0, min_count=5))
-    assert old is not None and new is not None
-    np.testing.assert_array_equal(old.Zs, new.Zs)
-    np.testing.assert_array_equal(old.z_fixed, new.z_fixed)
-    assert (old.ratio, old.success_rate) == (new.ratio, new.success_rate)
-    with pytest.raises(TypeError):
-        partial_fix(a_hat, Q, FixPolicy(), 3.0)
 
 
 def test_bounded_tries_and_biased_float_screening():

@@ -371,10 +371,10 @@ def partial_fixes(a_hat, Q) -> dict:
     """The partial fix as the centre's baseline filter and the onboard RTK each call it with their default
     settings: name -> PartialFix or None (Zs, z_fixed, ratio, success_rate). When one policy serves both,
     call it here with each estimator's settings."""
-    from augnet.centre.baseline import BaselineConfig
+    from augnet.centre.baseline_config import BaselineConfig, fix_policy as centre_fix_policy
     from augnet.gnss.ambiguity import partial_fix
     from augnet.onboard.rtk import RtkOptions, fix_policy
 
     c = BaselineConfig()
-    return {"centre": partial_fix(a_hat, Q, c.fix_min_success_rate, c.fix_ratio, c.fix_min_count),
+    return {"centre": partial_fix(a_hat, Q, centre_fix_policy(c, c.fix_min_count)),
             "onboard": partial_fix(a_hat, Q, fix_policy(RtkOptions()))}
