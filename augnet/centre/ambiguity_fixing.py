@@ -8,7 +8,7 @@ Per epoch, over the DD ambiguities not yet fixed (both frequencies, satellites a
 2. a wide-lane pre-transform, then LAMBDA with partial fixing (`augnet.gnss.ambiguity.partial_fix`: ratio test and
    bootstrapped success rate);
 3. the float solution conditioned on the fixed subset: a DD ambiguity (or a wide lane on its own) it pins to an
-   integer is a candidate, fixed once confirmed (`fix_confirmation.py`);
+   integer is a candidate, fixed once confirmed (`integer_streaks.py`);
 4. fixed integers are held as tight pseudo-observations (fix and hold), a new satellite is fixed against the held
    ones, and fixed ones are released when their phase residuals stop supporting them.
 """
@@ -21,8 +21,8 @@ import numpy as np
 
 from augnet.centre.baseline_config import BaselineConfig, fix_policy
 from augnet.centre.baseline_state import IONO, N1, ZWD_A, ZWD_B, dd_indices
-from augnet.centre.fix_confirmation import FixConfirmation
-from augnet.centre.fixed_integers import ALL_TABLES, FREQUENCY_TABLES, WIDE_LANE, FixedIntegers
+from augnet.centre.integer_streaks import IntegerStreaks
+from augnet.centre.baseline_integers import ALL_TABLES, FREQUENCY_TABLES, WIDE_LANE, BaselineIntegers
 from augnet.centre.single_differences import SingleDifferences
 from augnet.gnss.ambiguity import AmbiguityError, partial_fix
 from augnet.gnss.state_layout import StateLayout
@@ -90,8 +90,8 @@ class BaselineAmbiguities:
 
     def __init__(self, cfg: BaselineConfig):
         self.cfg = cfg
-        self.fixed = FixedIntegers()
-        self.confirmation = FixConfirmation(cfg.fix_confirm_epochs, cfg.fix_confirm_epochs_sure)
+        self.fixed = BaselineIntegers()
+        self.confirmation = IntegerStreaks(cfg.fix_confirm_epochs, cfg.fix_confirm_epochs_sure)
         self._bad_streak: dict[str, int] = {}  # sat -> epochs its fixed DD's residual has been too large
 
     def forget(self, sat: str) -> None:

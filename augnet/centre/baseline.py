@@ -29,7 +29,7 @@ from augnet.centre.baseline_state import (IONO, N1, ZWD_A, ZWD_B, SatelliteBlock
                                           new_state, restart_ambiguities)
 from augnet.centre.cycle_slips import CycleSlipDetector, Slips
 from augnet.centre.dd_residuals import ResidualSmoother, dd_integers, dispersive_split
-from augnet.centre.fixed_integers import FixedIntegers
+from augnet.centre.baseline_integers import BaselineIntegers
 from augnet.centre.ionosphere_prior import IonospherePrior, slant_mapping
 from augnet.centre.observations import StationEpoch
 from augnet.centre.reference_satellites import ReferenceSatellites, pair_with_references
@@ -111,7 +111,7 @@ class BaselineSolver:
         return self.references.refs
 
     @property
-    def fixed(self) -> FixedIntegers:
+    def fixed(self) -> BaselineIntegers:
         return self.ambiguities.fixed
 
     # --- one epoch -----------------------------------------------------------------------------------

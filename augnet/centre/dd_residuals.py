@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from augnet.centre.fixed_integers import FixedIntegers
+from augnet.centre.baseline_integers import BaselineIntegers
 
 
-def dd_integers(sats: np.ndarray, ref_of: np.ndarray, fixed: FixedIntegers) -> np.ndarray:
+def dd_integers(sats: np.ndarray, ref_of: np.ndarray, fixed: BaselineIntegers) -> np.ndarray:
     """(S, 2) DD integers N1, N2 against the reference: NaN where not both fixed, 0 for references."""
     dd_n = np.full((len(sats), 2), np.nan)
     for k, s in enumerate(sats):

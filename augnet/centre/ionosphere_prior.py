@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from augnet.centre.baseline_config import BaselineConfig
-from augnet.centre.fixed_integers import FixedIntegers
+from augnet.centre.baseline_integers import BaselineIntegers
 from augnet.gnss.ionosphere import SHELL_HEIGHT_M, thin_shell_mapping
 
 PPM = 1e-6
@@ -233,7 +233,7 @@ class IonospherePrior:
 
     # --- the prior in the integer decision ---------------------------------------------------------------
 
-    def pseudo_observations(self, sats, rows, ref_k, mapping, fixed: FixedIntegers, hints=None, model=None):
+    def pseudo_observations(self, sats, rows, ref_k, mapping, fixed: BaselineIntegers, hints=None, model=None):
         """The network's hints, plus, where the prior in force is tighter than the one a satellite's ionosphere
         state (and its reference's) started with, a DD ionosphere pseudo-observation whose variance makes up the
         difference (1/new = 1/old + 1/extra): as if the satellite had started with it (combined with the

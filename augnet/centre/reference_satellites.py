@@ -1,7 +1,7 @@
 """The reference satellite of each system on a baseline, and the double-difference pairing it gives.
 
 A system's reference is kept while it is healthy (no slip, no new arc) and above `ref_min_elevation_deg`; else the
-best healthy satellite takes over: a fixed one (its DD integers carry the others' over, `FixedIntegers.rereference`)
+best healthy satellite takes over: a fixed one (its DD integers carry the others' over, `BaselineIntegers.rereference`)
 and then the highest. It is chosen before slipped satellites are reset, so the others keep their integers.
 """
 
@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from augnet.centre.fixed_integers import FixedIntegers
+from augnet.centre.baseline_integers import BaselineIntegers
 
 
 class ReferenceSatellites:
@@ -20,7 +20,7 @@ class ReferenceSatellites:
         self.refs: dict[str, str] = {}  # system -> reference satellite
 
     def update(self, sats: np.ndarray, el_min_rad: np.ndarray, unhealthy: set[str],
-               fixed: FixedIntegers) -> list[tuple[str, str, str]]:
+               fixed: BaselineIntegers) -> list[tuple[str, str, str]]:
         """Choose this epoch's references; returns the (system, old, new) changes of a system that had one."""
         systems = np.array([s[0] for s in sats])
         changes = []

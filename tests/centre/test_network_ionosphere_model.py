@@ -109,11 +109,11 @@ def test_the_level_is_never_below_the_floor(floor):
 def test_the_models_prediction_becomes_the_prior_the_state_would_have_started_with():
     """The prior enters the integer decision as a pseudo-observation beside the state's own wide prior (zero mean):
     together they must give the model's mean and variance, and a network hint must then count as independent data."""
-    from augnet.centre.fixed_integers import FixedIntegers
+    from augnet.centre.baseline_integers import BaselineIntegers
     from augnet.centre.ionosphere_prior import IonospherePrior
 
     prior = IonospherePrior(BaselineConfig(), LENGTH_M)
-    none_fixed = FixedIntegers()
+    none_fixed = BaselineIntegers()
     sats, rows, ref_k, mapping = np.array(["G01", "G02"]), np.array([1]), np.array([0, 0]), np.array([1.0, 2.5])
     prior._state_prior = {"G01": 0.04, "G02": 0.25}  # the states' own priors [m^2]
     state_var = prior.state_prior_dd("G02", "G01")

@@ -1,7 +1,7 @@
 """Every call the golden test makes into the code under test, in one place.
 
 The golden data pin what the code computes, not how it is organised: a restructure that moves or renames
-one of the functions or attributes below (for example `BaselineSolver.fixed` becoming a `FixedIntegers`
+one of the functions or attributes below (for example `BaselineSolver.fixed` becoming a `BaselineIntegers`
 value, or CRC-24Q moving to a shared wire package) updates the matching probe here and leaves the golden
 files alone. A probe changes only how a value is reached, never which value is recorded.
 """

@@ -2,14 +2,15 @@
 consecutive epochs (fewer when the fixed block's success rate is very high).
 
 A single epoch's LAMBDA decision can be wrong where near-equivalent integer pairs are close; a wrong pair rarely
-wins several epochs running while the float solution keeps moving.
+wins several epochs running while the float solution keeps moving. (The onboard RTK confirms whole decisions
+instead: `augnet.gnss.fix_confirmation`.)
 """
 
 from __future__ import annotations
 
 
-class FixConfirmation:
-    """Per satellite and integer table (`fixed_integers.N1`, `N2`, `WIDE_LANE`): the integer pinned on the
+class IntegerStreaks:
+    """Per satellite and integer table (`baseline_integers.N1`, `N2`, `WIDE_LANE`): the integer pinned on the
     latest epochs and how many consecutive epochs pinned it."""
 
     def __init__(self, epochs: int, epochs_sure: int):

@@ -3,6 +3,7 @@
 SD ambiguities carry the SD receiver phase bias, common to one system's satellites, so only their DD are integers:
 N1 and N2 per satellite, and the wide lane N1 - N2, held on its own while the satellite's narrow lane is open.
 When a system's reference changes the DD are re-referenced: N(s, new) = N(s, old) - N(new, old).
+(An immutable set of DD integers by satellite pair, as a fix reports it, is `augnet.gnss.ambiguity.FixedIntegers`.)
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ ALL_TABLES = (N1, N2, WIDE_LANE)
 
 
 @dataclass
-class FixedIntegers:
+class BaselineIntegers:
     """satellite -> DD integer [cycles] against its system's reference, per table."""
 
     n1: dict[str, int] = field(default_factory=dict)
