@@ -64,6 +64,9 @@ PLAN_UPDATE_S = 0.1
 STOP_TIMEOUT_S = 5.0
 HEARTBEAT_S = 1.0  # the centre sends at least this often (`Alive` when it has nothing else)
 HANG_S = 20.0  # a centre silent this long is taken for hung: killed, reported and replaced
+# A new centre's start-up (spawned interpreter, imports, engine) before its Ready: seconds on a quiet machine,
+# over 20 s on a loaded one; HANG_S applies only once it has answered.
+START_S = 120.0
 MAX_DELIVERY_S = 1.0  # `delivering` stays true this long at most (an epoch whose last group never came)
 RESTART_DELAY_S = 1.0
 MAX_RESTARTS = 5  # per run: a centre that keeps dying stays down (its alarm stays raised)
@@ -145,10 +148,11 @@ class CentreService:
     def __init__(self, spec: CentreSpec, loop: asyncio.AbstractEventLoop,
                  on_epoch: Callable | None = None, on_outbox: Callable[[list[tuple[str, bytes]]], None] | None = None,
                  on_alarm: Callable[[str, str, str, str, bool], None] | None = None, hang_s: float = HANG_S,
-                 on_written: Callable[[float], None] | None = None):
+                 on_written: Callable[[float], None] | None = None, start_s: float = START_S):
         self.spec = spec
         self.on_written = on_written  # called (soon) after an epoch's last VRS group is written: on_written(t)
         self.hang_s = hang_s
+        self.start_s = max(start_s, hang_s)
         self.loop = loop
         self.on_epoch = on_epoch
         self.on_outbox = on_outbox
@@ -170,6 +174,7 @@ class CentreService:
         self._alarm_raised = False
         self._gps_minus_unix = gtime.now_gpst() - time.time()
         self._last_heard = 0.0  # loop time of the centre's last message
+        self._ready = False  # the current centre process has said Ready
         self._watchdog: asyncio.Task | None = None
         self._delivering_since: float | None = None  # loop time an epoch's first group was written
 
@@ -186,6 +191,11 @@ class CentreService:
     @property
     def alive(self) -> bool:
         return self._proc is not None and self._proc.is_alive() and self._channel is not None
+
+    @property
+    def ready(self) -> bool:
+        """The current centre process has started and answered."""
+        return self.alive and self._ready
 
     # --- loop side: the caster's taps and VRS mountpoint ------------------------------------------------
 
@@ -254,9 +264,10 @@ class CentreService:
         while not self._stopping:
             await asyncio.sleep(min(1.0, self.hang_s / 4))
             proc = self._proc
+            limit = self.hang_s if self._ready else self.start_s
             if (self._channel is not None and proc is not None and proc.is_alive()
-                    and self.loop.time() - self._last_heard > self.hang_s):
-                log.error("centre process %s has not answered for %.0f s: killed", proc.pid, self.hang_s)
+                    and self.loop.time() - self._last_heard > limit):
+                log.error("centre process %s has not answered for %.0f s: killed", proc.pid, limit)
                 proc.kill()
 
     async def _spawn(self) -> None:
@@ -270,7 +281,8 @@ class CentreService:
         theirs.close()
         self._proc = proc
         self.pid = proc.pid
-        self._last_heard = self.loop.time()  # it has the start-up (imports, engine) on top to answer
+        self._last_heard = self.loop.time()
+        self._ready = False  # START_S until it answers
         _, channel = await self.loop.create_connection(lambda: _Channel(self), sock=mine)
         self._channel = channel
         # sessions the caster already has (after a restart) first, then whatever queued meanwhile
@@ -363,6 +375,7 @@ class CentreService:
                 self.errors += 1
                 log.error("centre: %s", msg.text)
             elif isinstance(msg, Ready):
+                self._ready = True
                 log.info("centre process %s ready", msg.pid)
         except Exception:  # noqa: BLE001 - a consumer's bug must not stop the centre's output
             self.errors += 1

@@ -173,7 +173,7 @@ def test_a_centre_that_stops_answering_is_killed_reported_and_replaced(recorded)
 
         svc, epochs, alarms = _service(world, stations, hang_s=2.0)
         await svc.start()
-        await _until(lambda: svc.alive)
+        await _until(lambda: svc.ready)
         first = svc._proc
         os.kill(first.pid, signal.SIGSTOP)  # alive, but silent
         await _until(lambda: alarms, timeout=20)
@@ -182,6 +182,28 @@ def test_a_centre_that_stops_answering_is_killed_reported_and_replaced(recorded)
         assert not first.is_alive() and svc.restarts == 1
         await _feed(svc, streams, stations, range(0, 3), 0.05)
         await _until(lambda: len(epochs) >= 2)
+        await svc.stop()
+
+    asyncio.run(main())
+
+
+def test_a_starting_centre_has_start_s_to_answer_not_hang_s(recorded):
+    """A loaded machine can take longer than HANG_S to spawn a centre and build its engine: until it says Ready
+    the watchdog waits START_S, and only then takes it for hung."""
+    world, _, stations = recorded
+
+    async def main():
+        import os
+        import signal
+
+        svc, _, alarms = _service(world, stations, hang_s=0.5, start_s=6.0)
+        await svc.start()
+        first = svc._proc
+        os.kill(first.pid, signal.SIGSTOP)  # stopped during its start-up, before Ready
+        await asyncio.sleep(2.0)  # four times hang_s
+        assert first.is_alive() and svc.restarts == 0 and not alarms
+        await _until(lambda: alarms, timeout=30)  # killed after start_s, reported and replaced
+        assert not first.is_alive() and alarms[0][0] == "centre-process"
         await svc.stop()
 
     asyncio.run(main())
