@@ -1,5 +1,6 @@
-# augnet: `make run` starts the main job, `make test` runs every test.
-# Both create .venv when missing and install what the project needs, Debian packages included.
+# augnet: `make run` starts the main job, `make test` runs every test (what CI runs), `make test-fast`
+# the inner loop: every test not marked `slow` or `postgres` (under 3 minutes; tiers in tests/README.md).
+# All create .venv when missing and install what the project needs, Debian packages included.
 
 PYTHON ?= python3
 VENV   := .venv
@@ -11,13 +12,16 @@ SUDO   := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 DEBS   := rtklib curl chromium chromium-driver
 DEB_CHECK := command -v rnx2rtkp >/dev/null && command -v convbin >/dev/null && command -v str2str >/dev/null && command -v rtkrcv >/dev/null && command -v curl >/dev/null && command -v chromium >/dev/null && command -v chromedriver >/dev/null
 
-.PHONY: run test bench debs venv clean
+.PHONY: run test test-fast bench debs venv clean
 
 run: venv
 	$(VENV)/bin/augnet up demo
 
 test: venv debs
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(PY) -m pytest -q
+
+test-fast: venv debs
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(PY) -m pytest -q -m "not slow and not postgres"
 
 bench: venv debs
 	$(VENV)/bin/augnet bench all

@@ -4,7 +4,8 @@ The centre is not built yet; `StandInCentre` plays its part with the public Cent
 fresh corrections every cycle, then a fault). `time_to_alarm` opens both ends on loopback (UDP as
 deployed, or length-prefixed TCP), waits for the RBC to hold a fresh picture, injects the fault at the
 centre and measures, on the one monotonic clock both share, how long until the RBC simulator raises
-its alarm. Used by tests/rssp1/test_loopback.py and `python -m rssp1 demo`.
+its alarm, and how many main cycles of each end started meanwhile. `python -m rssp1 demo` prints the
+time; tests/rssp1/test_loopback.py judges the cycle counts, which a loaded machine does not stretch.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ DEMO_RBC = DeviceConfig(0x0029, (0x311616DC, 0x07643EDE), dataver=(10, 11), name
 DEMO_SECTIONS = tuple(range(1, 11))
 FAULT_SECTION = 7
 WAIT_LIMIT_S = 10.0  # give up waiting for link-up or alarm after this (a test then fails, never hangs)
+CORRECTION_AGE_LIMIT_CYCLES = 4  # both ends' correction-age limit, in main cycles
 
 
 class StandInCentre:
@@ -55,6 +57,7 @@ class AlarmTiming:
     link_up_s: float  # from start to the RBC holding a fresh picture
     time_to_alarm_s: float  # fault injected at the centre -> RBC simulator alarm
     centre_cycles: int  # centre main cycles that started between the fault and the alarm
+    rbc_cycles: int  # RBC main cycles that started between the fault and the alarm
     alarm: str
     rbc_stats: dict[str, int]
 
@@ -80,7 +83,7 @@ async def time_to_alarm(
     if sealed:
         keys = Keyring({1: bytes(range(32))})
         centre_ep, rbc_ep = SealedEndpoint(centre_ep, keys), SealedEndpoint(rbc_ep, keys)
-    max_age_s = 4 * timing.cycle_s
+    max_age_s = CORRECTION_AGE_LIMIT_CYCLES * timing.cycle_s
     centre = StandInCentre(CentreRbcLink(centre_ep, max_correction_age_s=max_age_s))
     rbc = RbcSimulator(rbc_ep, max_correction_age_s=max_age_s)
     start = clock()
@@ -101,7 +104,7 @@ async def time_to_alarm(
         # run steadily for a while, then fault at a random point of the cycle
         phase = random.uniform(0.0, timing.cycle_s) if phase_s is None else phase_s
         await asyncio.sleep(3 * timing.cycle_s + phase)
-        cycles_before = centre_link.stats["cycles"]
+        centre_before, rbc_before = centre_link.stats["cycles"], rbc_link.stats["cycles"]
         if fault == "section":
             fault_at = clock()
             centre.link.set_section(FAULT_SECTION, SectionStatus.DO_NOT_USE)
@@ -116,12 +119,13 @@ async def time_to_alarm(
             code, section = AlarmCode.LINK_LOST, None
         else:
             raise ValueError(f"fault {fault!r}")
+        # polled every 2 ms on the loop that runs both ends: read before either end's next cycle
         await _wait_for(lambda: rbc.first_alarm(code, section) is not None, clock)
         alarm = rbc.first_alarm(code, section)
         assert alarm is not None
         return AlarmTiming(
-            transport, sealed, up_at - start, alarm.at_s - fault_at, centre_link.stats["cycles"] - cycles_before,
-            code.name, dict(rbc.stats),
+            transport, sealed, up_at - start, alarm.at_s - fault_at, centre_link.stats["cycles"] - centre_before,
+            rbc_link.stats["cycles"] - rbc_before, code.name, dict(rbc.stats),
         )
     finally:
         for link in (centre_link, rbc_link):

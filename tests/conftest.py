@@ -14,6 +14,9 @@ limit_blas_threads()
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = REPO_ROOT.parent / "shared" / "data"
+# Hang guard for the long simulations (the network hour, the interpolation figures, the demo scenario):
+# pytest-timeout's 600 s (pyproject) cut them off at a load average of 6-11 on two cores (2026-12-01).
+LONG_RUN_TIMEOUT_S = 1800
 
 
 @pytest.fixture(scope="session")

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from augnet.centre.engine import CentreEngine, CentreStreamFactory, correction_model_json
 from augnet.centre.ingest import StationDecoder
@@ -13,6 +14,8 @@ from augnet.gnss.geometry import ecef_to_geodetic
 from ntrip_caster.gga import GgaFix
 from ntrip_caster.stream_factory import StreamFactory
 from tests.centre.simdata import recorded_streams
+
+pytestmark = pytest.mark.slow
 
 DURATION_S = 20
 

@@ -33,6 +33,7 @@ def sim():
     return world, streams, blocks
 
 
+@pytest.mark.slow
 def test_station_streams_decode_to_the_simulated_observations(sim):
     world, streams, blocks = sim
     ids = world.receiver_ids
@@ -83,6 +84,7 @@ def test_aligner_releases_complete_epochs_and_does_not_wait_forever_for_a_silent
     assert al.late_dropped == 1
 
 
+@pytest.mark.slow
 def test_vrs_stream_round_trips_and_rtklib_reads_it(sim, tmp_path):
     world, streams, blocks = sim
     ids = world.receiver_ids

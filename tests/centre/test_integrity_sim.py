@@ -4,12 +4,15 @@ station that stops is reported and the network carries on without it."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from augnet.centre.network import NetworkSolver
 from augnet.centre.vrs import synthesize
 from stations.scenario import Fault, load_scenario
 from stations.world import World
 from tests.centre.simdata import station_epochs
+
+pytestmark = pytest.mark.slow
 
 FAULT_AT_S = 40.0
 

@@ -19,6 +19,7 @@ from augnet.centre.interpolation import (
     select_model,
     spread_ratio,
 )
+from tests.conftest import LONG_RUN_TIMEOUT_S
 
 # A 210 km railway with stations every ~70 km, gently curving (a few km off a straight line), and two
 # stations 25-30 km off the line.
@@ -267,6 +268,7 @@ def network_figures():
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(LONG_RUN_TIMEOUT_S)
 def test_interpolated_dd_ionosphere_at_35_km_quiet(network_figures):
     """Measured when written (20 min at 0.5 Hz): 0.87-0.95 cm RMS (95 % 1.6-1.8 cm) as the network engine changed
     under it; 0.62-0.64 cm from the true station residuals (what the non-linear field leaves); the rest is the station residuals' own error (~0.8 cm per
@@ -279,6 +281,7 @@ def test_interpolated_dd_ionosphere_at_35_km_quiet(network_figures):
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(LONG_RUN_TIMEOUT_S)
 def test_moderate_and_storm_and_leave_one_out_are_reported(network_figures):
     """Loose bounds only: the figures are printed. Measured when written (10 min each): moderate 1.6 cm
     (floor 1.4-1.5), storm 32-43 cm (floor 29-30; the storm's station residuals themselves are off by more as
@@ -327,6 +330,7 @@ def _floor_from_truth(level: str, duration_s: float = 3600.0, rate_hz: float = 0
     return float(np.sqrt(np.mean(np.square(errs))))
 
 
+@pytest.mark.slow
 def test_interpolation_floor_of_each_ionosphere_level():
     """The floor in stations/README.md: quiet 0.63 cm, moderate 1.35 cm, active 5.8 cm, storm 18 cm (an hour at
     20 s); quiet leaves room under the 1 cm target for the station residuals' own error, moderate does not."""

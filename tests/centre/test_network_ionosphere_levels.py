@@ -25,6 +25,8 @@ from stations.scenario import load_scenario
 from stations.world import World
 from tests.centre.simdata import station_epochs
 
+pytestmark = pytest.mark.slow
+
 DURATION_S = 90
 
 

@@ -12,6 +12,8 @@ from stations.scenario import load_scenario
 from stations.world import World
 from tests.centre.simdata import station_epochs, truth_dd_ambiguity
 
+pytestmark = pytest.mark.slow
+
 DURATION_S = 240
 
 

@@ -190,6 +190,7 @@ def test_single_base_vrs_at_the_master_reproduces_it(shared_data):
     assert np.abs(moved.code_m - ep.code_m[k]).min() > 100.0  # 8 km away: the ranges change
 
 
+@pytest.mark.slow
 @pytest.mark.shared_data
 def test_real_vrs_at_zegv_matches_zegvs_own_observations(shared_data):
     """ZEGV left out, the network (DELF, WSRA, ROVN) synthesises a VRS at ZEGV's surveyed position from DELF,
@@ -233,6 +234,7 @@ def test_real_vrs_at_zegv_matches_zegvs_own_observations(shared_data):
 # --- command line ----------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.shared_data
 def test_cli_on_real_dutch_stations(shared_data, tmp_path):
     """`augnet vrs` end to end on nl-network-2021: it runs, says what it could not solve, and writes RINEX
@@ -284,6 +286,7 @@ def test_summary_states_the_no_fix_case():
 # --- a recording -----------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_recording_before_any_fix_is_single_base_whatever_the_master(tmp_path):
     """The first 20 s of network-70km: a VRS epoch may claim network corrections only for satellites some
     baseline has fixed -- also with the point's nearest station as network master, where the interpolation

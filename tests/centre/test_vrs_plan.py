@@ -14,6 +14,8 @@ from tests.centre.simdata import recorded_streams, station_epochs
 from stations.scenario import load_scenario
 from stations.world import World
 
+pytestmark = pytest.mark.slow
+
 
 EPOCHS = 40  # the network fixes its first ambiguities: the VRS carry interpolated corrections
 

@@ -184,6 +184,7 @@ def network70(tmp_path_factory):
 # --- a. real data ----------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.rtklib
 @pytest.mark.shared_data
 def test_rtklib_convbin_reads_the_real_data_vrs(shared_data, tmp_path):

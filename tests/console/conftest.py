@@ -46,7 +46,7 @@ def empty_store(sessions) -> None:
             s.execute(table.delete())
 
 
-@pytest.fixture(params=["sqlite", "postgresql"])
+@pytest.fixture(params=["sqlite", pytest.param("postgresql", marks=pytest.mark.postgres)])
 def sessions(request, tmp_path):
     """A migrated, empty store on each backend."""
     if request.param == "sqlite":

@@ -74,6 +74,7 @@ class MovingTrains:
                                                  "fix" if tid == "T1" else "float", 1.0, 0.15, 0.3, 120.0))
 
 
+@pytest.mark.slow
 def test_page_trains_move_and_acknowledge_updates_page_and_audit(driver, sqlite_sessions, tmp_path):
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait

@@ -60,6 +60,7 @@ def test_console_mounted_under_augnet():
         assert command in r.output
 
 
+@pytest.mark.slow
 def test_bench_measures_every_main_route(tmp_path):
     sessions = open_store(f"sqlite:///{tmp_path / 'bench.sqlite'}")
     from augnet.console.security import ensure_admin
@@ -97,6 +98,7 @@ def test_bench_measures_every_main_route(tmp_path):
     assert r.exit_code == 2 and "cannot reach" in r.output
 
 
+@pytest.mark.slow
 def test_serve_command_bootstraps_an_admin_and_serves(tmp_path):
     import socket
     import subprocess

@@ -31,7 +31,8 @@ values = st.recursive(scalars, lambda inner: st.lists(inner, max_size=3) | st.di
 bodies = st.one_of(st.dictionaries(st.sampled_from(FIELDS), values, max_size=8), values)
 
 
-@pytest.fixture(scope="module", params=["sqlite", "postgresql"])
+@pytest.fixture(scope="module",
+                params=["sqlite", pytest.param("postgresql", marks=pytest.mark.postgres)])
 def fuzz_console(request, tmp_path_factory):
     if request.param == "sqlite":
         sessions = open_store(f"sqlite:///{tmp_path_factory.mktemp('fuzz') / 'fuzz.sqlite'}")
@@ -55,6 +56,7 @@ ROUTES = [("POST", "/api/auth/login"), ("POST", "/api/operators"), ("PATCH", "/a
           ("PATCH", "/api/caster/users/train1")]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method, path", ROUTES)
 def test_random_bodies_never_crash(fuzz_console, method, path):
     client, admin = fuzz_console

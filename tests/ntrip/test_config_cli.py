@@ -128,6 +128,7 @@ def test_cli_hash_password_check_and_sourcetable(tmp_path):
     assert out.exit_code == 2 and "unknown keys" in out.stderr
 
 
+@pytest.mark.slow
 def test_serve_subprocess_stats_file_and_sigterm(tmp_path):
     p = tmp_path / "c.toml"
     stats = tmp_path / "stats.json"

@@ -3,8 +3,6 @@ and the live caster answers garbage with an error (or the sourcetable) and a clo
 
 from __future__ import annotations
 
-import time
-
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -66,6 +64,7 @@ def test_every_split_of_real_requests_gives_the_same_events():
         assert feed_all([bytes([b]) for b in wire]) == whole
 
 
+@pytest.mark.slow
 @settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.binary(max_size=3000), st.lists(st.integers(0, 3000), max_size=6))
 def test_random_bytes_never_crash(data, cuts):
@@ -74,6 +73,7 @@ def test_random_bytes_never_crash(data, cuts):
     feed_all(pieces)
 
 
+@pytest.mark.slow
 @settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(st.sampled_from(TOKENS), max_size=60), st.sampled_from(REAL_REQUESTS),
        st.integers(0, 200))
@@ -130,6 +130,7 @@ def fuzz_caster():
         yield ct
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow,
                                                                  HealthCheck.function_scoped_fixture])
 @given(st.lists(st.sampled_from(TOKENS), max_size=40), st.binary(max_size=200))
@@ -142,8 +143,7 @@ def test_live_caster_fuzzed_requests_always_answered(fuzz_caster, tokens, tail):
         s.sendall(wire)
     except OSError:
         pass
-    t0 = time.monotonic()
-    s.settimeout(3)
+    s.settimeout(3)  # hang guard: the head timeout is 0.25 s
     reply = b""
     try:
         while True:
@@ -153,10 +153,12 @@ def test_live_caster_fuzzed_requests_always_answered(fuzz_caster, tokens, tail):
             reply += data
             if reply.startswith((b"ICY 200 OK", b"HTTP/1.1 200 OK")):
                 break  # a stream was granted (e.g. a valid GET on a public mount): fine
-    except (ConnectionResetError, TimeoutError):
+    except ConnectionResetError:
         pass
-    s.close()
-    assert time.monotonic() - t0 < 3, "no answer and no close within 3 s"
+    except TimeoutError:
+        pytest.fail(f"no answer and no close within 3 s: {reply[:80]!r}")
+    finally:
+        s.close()
     if reply:
         first = reply.split(b"\r\n", 1)[0]
         assert first.startswith((b"SOURCETABLE 200", b"ERROR - ", b"ICY 200 OK", b"HTTP/1.1 200")) \
@@ -177,15 +179,14 @@ def test_many_slow_loris_connections_do_not_starve_real_clients():
         assert head == b"ICY 200 OK\r\n"
         src.sendall(b"\xd3\x00\x00G\xeaK")
         assert read_until(c, b"G\xeaK") == b"\xd3\x00\x00G\xeaK"
-        t0 = time.monotonic()
         for s in loris[:20]:  # dribbling does not extend the deadline
             s.sendall(b"R")
         closed = 0
         for s in loris:
-            reply = read_all(s, timeout=5)
+            reply = read_all(s, timeout=5)  # hang guard: the head timeout is 1 s
             closed += reply.startswith(b"HTTP/1.0 408")
             s.close()
-        assert closed == 200 and time.monotonic() - t0 < 5
+        assert closed == 200
         assert ct.snapshot(clients=False)["counters"]["head_timeouts"] == 200
         c.close()
         src.close()

@@ -240,6 +240,7 @@ def test_v2_post_without_chunked_body_is_raw():
     assert conn.receive_data(b"more") == [SourceData(b"more")]
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(st.binary(min_size=0, max_size=1100))
 def test_vectorised_crc24q_equals_the_byte_loop(data):

@@ -200,10 +200,9 @@ def test_slow_loris_and_idle_source_time_out():
     limits = Limits(request_head_timeout_s=0.3, source_idle_timeout_s=0.6)
     with CasterThread(make_config(limits=limits)) as ct:
         s = connect(ct.port)
-        t0 = time.monotonic()
         s.sendall(b"GET /BASE01 HTTP/1.0\r\nUser-Ag")  # ... and never finish
-        reply = read_all(s, timeout=5)
-        assert reply.startswith(b"HTTP/1.0 408") and time.monotonic() - t0 < 3
+        reply = read_all(s, timeout=3)  # hang guard: the head timeout is 0.3 s
+        assert reply.startswith(b"HTTP/1.0 408")
         src = open_v1_source(ct.port, "BASE01")
         src.sendall(frame_rtcm3(b"\x3e\xd0" + bytes(20)))
         wait_for(lambda: ct.snapshot(clients=False)["mounts"]["BASE01"]["drops"].get("source_idle"),

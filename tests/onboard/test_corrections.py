@@ -81,6 +81,7 @@ def _msm7_frames(ep, tow_ms, offsets):
     return frames
 
 
+@pytest.mark.slow
 def test_realtime_path_rtcm_corrections_to_a_fixed_rover(shared_data):
     from augnet.onboard.inputs import load_nav, load_obs
 

@@ -4,7 +4,11 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from augnet.bench import rssp1 as bench
+
+pytestmark = pytest.mark.slow
 
 
 def test_bench_runs_and_reports_every_path(monkeypatch, capsys):

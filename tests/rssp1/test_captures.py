@@ -110,6 +110,7 @@ def test_cli_inspect_prints_per_source_counts(captures):
     assert bad.exit_code != 0
 
 
+@pytest.mark.slow
 def test_python_dash_m_entry_point(captures):
     out = subprocess.run(
         [sys.executable, "-m", "rssp1", "inspect", str(captures[1]), "--recover-sids"],

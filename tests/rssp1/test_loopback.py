@@ -1,5 +1,9 @@
-"""End to end over real loopback sockets: stand-in centre -> RSSP-I -> RBC simulator, time to alarm;
-the TCP framing and reconnection."""
+"""End to end over real loopback sockets: stand-in centre -> RSSP-I -> RBC simulator, the alarm within
+a bound of main cycles; the TCP framing and reconnection.
+
+Judged in main cycles counted at both ends, not in seconds: the requirement in seconds (issue 7: time
+to alarm <= 1 s) is checked on a stepped clock in test_rbc_atp.py, and `augnet rssp1 demo` measures it
+over these sockets."""
 
 from __future__ import annotations
 
@@ -14,21 +18,19 @@ from rssp1.cli import app
 from rssp1.config import LinkTiming
 from rssp1.endpoint import DataReceived, Endpoint, LinkUp
 from rssp1.frames import MAX_FRAME_BYTES
-from rssp1.loopback import DEMO_CENTRE, DEMO_RBC, time_to_alarm
+from rssp1.loopback import CORRECTION_AGE_LIMIT_CYCLES, DEMO_CENTRE, DEMO_RBC, time_to_alarm
 from rssp1.transport import EndpointNode, LengthPrefixedDecoder, StreamOutOfStep, TcpLink, length_prefixed
 
 FIELD = LinkTiming(cycle_s=0.25, delta_time=3, life_time=4, delay_time=3)
 FAST = LinkTiming(cycle_s=0.1, delta_time=3, life_time=4, delay_time=3)
-TIME_TO_ALARM_LIMIT_S = 1.0  # issue 7
+# The alarm rides the centre's next cycle; one more for a fault landing while a cycle is under way.
+SECTION_ALARM_CENTRE_CYCLES = 2
 
 
 @pytest.mark.timeout(60)
 def test_time_to_alarm_over_udp_with_field_timing():
     result = asyncio.run(time_to_alarm(FIELD, transport="udp"))
-    # The alarm rides the centre's next cycle: at most one cycle plus scheduling; the cycle count is
-    # the robust check on a loaded machine, the measured time the requirement.
-    assert result.centre_cycles <= 2, result
-    assert result.time_to_alarm_s <= TIME_TO_ALARM_LIMIT_S, result
+    assert result.centre_cycles <= SECTION_ALARM_CENTRE_CYCLES, result
     assert result.rbc_stats.get("alarm_link_lost", 0) == 0
 
 
@@ -36,14 +38,14 @@ def test_time_to_alarm_over_udp_with_field_timing():
 @pytest.mark.parametrize("transport,sealed", [("udp", True), ("tcp", False)], ids=["udp-sealed", "tcp"])
 def test_time_to_alarm_sealed_and_over_tcp(transport, sealed):
     result = asyncio.run(time_to_alarm(FAST, transport=transport, sealed=sealed))
-    assert result.centre_cycles <= 2 and result.time_to_alarm_s <= TIME_TO_ALARM_LIMIT_S, result
+    assert result.centre_cycles <= SECTION_ALARM_CENTRE_CYCLES, result
 
 
 @pytest.mark.timeout(60)
 def test_time_to_alarm_worst_phase_fault_just_after_a_cycle():
     # the fault lands just after the centre's cycle began: it waits a whole cycle for the next one
     result = asyncio.run(time_to_alarm(FIELD, transport="udp", phase_s=0.01))
-    assert result.centre_cycles <= 2 and result.time_to_alarm_s <= TIME_TO_ALARM_LIMIT_S, result
+    assert result.centre_cycles <= SECTION_ALARM_CENTRE_CYCLES, result
 
 
 def test_demo_command():
@@ -55,15 +57,17 @@ def test_demo_command():
 @pytest.mark.timeout(60)
 def test_correction_age_watchdog_over_udp():
     result = asyncio.run(time_to_alarm(FAST, fault="corrections"))
-    # counted from the moment the age passes the limit: the next report or the RBC's next cycle
-    assert result.time_to_alarm_s <= TIME_TO_ALARM_LIMIT_S, result
+    # from the last production: the age passes the limit after CORRECTION_AGE_LIMIT_CYCLES, and the
+    # next report (or the RBC's own ageing) raises the alarm; one more for the phase of the stop
+    assert result.centre_cycles <= CORRECTION_AGE_LIMIT_CYCLES + 2, result
 
 
 @pytest.mark.timeout(60)
 def test_link_loss_alarm_over_udp():
     result = asyncio.run(time_to_alarm(FAST, fault="link"))
-    # DelayTime whole cycles without a frame, measured from a random phase: (3, 4] cycles
-    assert result.time_to_alarm_s <= (FAST.delay_time + 1) * FAST.cycle_s + 0.5, result
+    # DelayTime whole RBC cycles without a frame, from a random phase: (3, 4] cycles, one more for the
+    # cycle under way when the centre fell silent
+    assert result.rbc_cycles <= FAST.delay_time + 2, result
 
 
 def test_length_prefixed_stream_in_odd_splits():

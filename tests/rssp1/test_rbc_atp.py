@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import pytest
+
 from rssp1.atp import AtpSimulator, BaliseLocation, OnboardAtpLink
 from rssp1.config import DeviceConfig, LinkTiming
 from rssp1.endpoint import Endpoint
+from rssp1.envelope import Keyring, SealedEndpoint
 from rssp1.frames import RSD_TYPES, decode_frame
 from rssp1.messages import AlarmCode, SectionStatus, Severity
 from rssp1.rbc import CentreRbcLink, RbcSimulator
@@ -12,6 +15,7 @@ from rssp1.rbc import CentreRbcLink, RbcSimulator
 from .linkpair import CENTRE, RBC
 
 TIMING = LinkTiming(cycle_s=0.25, delta_time=3, life_time=4, delay_time=3)
+TIME_TO_ALARM_LIMIT_S = 1.0  # issue 7: a fault at the centre is an alarm at the RBC within 1 s
 ONBOARD = DeviceConfig(0x0301, (0x0BADCAFE, 0x600DF00D), dataver=(3, 4))
 ATP = DeviceConfig(0x0302, (0x13572468, 0x24681357), dataver=(5, 6))
 
@@ -35,10 +39,36 @@ class Lockstep:
             self.now += TIMING.cycle_s
 
 
-def rbc_pair(**kw):
-    centre = CentreRbcLink(Endpoint(CENTRE, RBC, TIMING), **kw)
-    rbc = RbcSimulator(Endpoint(RBC, CENTRE, TIMING), **kw)
+def rbc_pair(sealed: bool = False, **kw):
+    centre_ep, rbc_ep = Endpoint(CENTRE, RBC, TIMING), Endpoint(RBC, CENTRE, TIMING)
+    if sealed:
+        keys = Keyring({1: bytes(range(32))})
+        centre_ep, rbc_ep = SealedEndpoint(centre_ep, keys), SealedEndpoint(rbc_ep, keys)
+    centre = CentreRbcLink(centre_ep, **kw)
+    rbc = RbcSimulator(rbc_ep, **kw)
     return centre, rbc, Lockstep(centre, rbc)
+
+
+@pytest.mark.parametrize("sealed", [False, True], ids=["open", "sealed"])
+@pytest.mark.parametrize("fault", ["section", "link"])
+def test_time_to_alarm_within_the_limit_at_the_worst_phase(fault, sealed):
+    """Field timing, the fault just after both ends' cycle ran (it waits a whole cycle for the next):
+    the alarm within the issue's 1 s on the stepped clock."""
+    centre, rbc, net = rbc_pair(sealed)
+    centre.set_section(5, SectionStatus.OK)
+    centre.corrections_updated(1_000, produced_at_s=net.now)
+    net.step(4)
+    assert rbc.effective_status(5) is SectionStatus.OK
+    fault_at = net.now - TIMING.cycle_s  # the last cycle's instant: the worst phase
+    if fault == "section":
+        centre.set_section(5, SectionStatus.DO_NOT_USE)
+        code, section = AlarmCode.SECTION_DO_NOT_USE, 5
+    else:
+        net.cut = True
+        code, section = AlarmCode.LINK_LOST, None
+    net.step(round(TIME_TO_ALARM_LIMIT_S / TIMING.cycle_s))
+    alarm = rbc.first_alarm(code, section)
+    assert alarm is not None and alarm.at_s - fault_at <= TIME_TO_ALARM_LIMIT_S, rbc.alarms
 
 
 def test_reports_reach_the_rbc_fail_safe_until_then():

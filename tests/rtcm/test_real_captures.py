@@ -13,6 +13,7 @@ from ._support import assert_same_fields, pyrtcm_fields
 CAPTURES = ["GMSD7_20121014.rtcm3", "testglo.rtcm3", "ntrip-USCL00CHL0.rtcm3"]
 
 
+@pytest.mark.slow
 @pytest.mark.shared_data
 @pytest.mark.parametrize("name", CAPTURES)
 def test_capture_decodes_and_reencodes_identically(shared_data, name):

@@ -19,6 +19,9 @@ from typer.testing import CliRunner
 from augnet.scenario import report as R
 from augnet.scenario.runner import DEFAULT_WARM_UP_S, run, simulate
 from stations.scenario import ScenarioError
+from tests.conftest import LONG_RUN_TIMEOUT_S
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(LONG_RUN_TIMEOUT_S)]
 
 DEMO_S = 600  # the demo scenario's own duration
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"

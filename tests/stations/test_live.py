@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 
+import pytest
 from pyrtcm import RTCMReader
 
 from ntrip_caster.config import CasterConfig
@@ -37,6 +38,7 @@ async def _read_mount(port: int, mount: str, seconds: float) -> bytes:
     return data
 
 
+@pytest.mark.slow
 def test_stations_stream_to_the_project_caster():
     with CasterThread(CasterConfig(port=0, allow_unknown_sources=True), use_uvloop=False) as ct:
         async def main():

@@ -44,6 +44,7 @@ def test_files_written(demo_recording):
     assert resolved["seed"] == sc.seed
 
 
+@pytest.mark.slow
 def test_same_seed_same_bytes(demo_recording, tmp_path):
     sc, out, _ = demo_recording
     record(sc, tmp_path / "again")

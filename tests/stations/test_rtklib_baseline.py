@@ -19,6 +19,8 @@ from stations.record import record
 from stations.scenario import load_scenario
 from tests.conftest import require_tool
 
+pytestmark = pytest.mark.slow
+
 DURATION_S = 360  # 6 minutes of 1 Hz data: the first minute is convergence, five are judged
 
 CONFIG = """\

@@ -144,6 +144,7 @@ def test_orbit_and_clock_errors_have_stated_size():
     assert np.max(np.abs(_cat(bl0, "sat_clock_error_s")[obs0])) < 0.3e-9
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name,level,a,b,lo,hi", [("network-70km", None, "NORTH", "SOUTH", 1.0, 4.0),
                                                    ("network-70km", "moderate", "NORTH", "SOUTH", 1.0, 4.0),
                                                    ("iono-storm", None, "ST1", "ST2", 10.0, 20.0)])
@@ -199,6 +200,7 @@ def test_half_cycle_flag_only_when_enabled():
     assert np.any(lli[:5] & 2) and not np.any(lli[10:] & 2)
 
 
+@pytest.mark.slow
 def test_trains_follow_the_track_and_lose_lock_in_the_tunnel():
     sc = load_scenario("demo")
     w = World(sc)

@@ -30,7 +30,7 @@ def _postgres_url():
     return url, admin, name
 
 
-@pytest.fixture(params=["sqlite", "postgresql"])
+@pytest.fixture(params=["sqlite", pytest.param("postgresql", marks=pytest.mark.postgres)])
 def store(request, tmp_path):
     if request.param == "sqlite":
         yield open_store(f"sqlite:///{tmp_path / 'augnet.sqlite'}")

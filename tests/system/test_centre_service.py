@@ -18,6 +18,8 @@ from ntrip_caster.gga import GgaFix
 from ntrip_caster.stream_factory import StreamFactory
 from tests.centre.simdata import recorded_streams
 
+pytestmark = pytest.mark.slow
+
 EPOCHS = 12
 
 
@@ -156,9 +158,8 @@ def test_stop_kills_a_centre_that_does_not_answer(recorded):
         await svc.start()
         await _until(lambda: svc.alive)
         os.kill(svc.pid, signal.SIGSTOP)  # hung: it will not read its "stop"
-        t0 = time.monotonic()
-        await svc.stop(timeout=0.5)
-        assert not svc._proc.is_alive() and time.monotonic() - t0 < 10
+        await asyncio.wait_for(svc.stop(timeout=0.5), 10)  # hang guard: the kill follows the 0.5 s
+        assert not svc._proc.is_alive()
         assert not alarms  # a stop is not a crash
 
     asyncio.run(main())
