@@ -428,7 +428,7 @@ def run(case: str, shared: Path | None) -> dict:
 # (golden case, its first epochs, the items compared)
 GOLDEN_SOURCE = {"centre_process": ("vrs_streams", CENTRE_PROCESS_EPOCHS, ("t", "bus", *VRS_OFFSETS_M))}
 
-# name -> (function, needs ../shared/data, slow (> ~20 s alone))
+# name -> (function, needs ../shared/data, slow: over ~3 s, outside `make test-fast`)
 CASES: dict[str, tuple[Callable[[Path | None], dict], bool, bool]] = {
     "rtcm_encoder": (rtcm_encoder, False, False),
     "wire": (wire, False, False),
@@ -436,10 +436,10 @@ CASES: dict[str, tuple[Callable[[Path | None], dict], bool, bool]] = {
     "vrs_streams": (vrs_streams, False, True),
     "centre_network_sim": (centre_network_sim, False, True),
     "onboard_sim_vrs": (onboard_sim_vrs, False, True),
-    "centre_process": (centre_process, False, False),
-    "centre_network_catnet": (centre_network_catnet, True, False),
+    "centre_process": (centre_process, False, True),
+    "centre_network_catnet": (centre_network_catnet, True, True),
     "centre_network_nl": (centre_network_nl, True, False),
-    "onboard_static": (onboard_static, True, False),
+    "onboard_static": (onboard_static, True, True),
     "onboard_yokohama": (onboard_yokohama, True, False),
     "onboard_garr_upc1": (onboard_garr_upc1, True, False),
 }
