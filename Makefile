@@ -12,16 +12,20 @@ SUDO   := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 DEBS   := rtklib curl chromium chromium-driver
 DEB_CHECK := command -v rnx2rtkp >/dev/null && command -v convbin >/dev/null && command -v str2str >/dev/null && command -v rtkrcv >/dev/null && command -v curl >/dev/null && command -v chromium >/dev/null && command -v chromedriver >/dev/null
 
+# One pytest worker per core, a whole test file to a worker (module fixtures are built once); WORKERS=0: serial.
+WORKERS  ?= 2
+PARALLEL := $(if $(filter 0,$(WORKERS)),,-n $(WORKERS) --dist loadfile)
+
 .PHONY: run test test-fast bench debs venv clean
 
 run: venv
 	$(VENV)/bin/augnet up demo
 
 test: venv debs
-	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(PY) -m pytest -q
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(PY) -m pytest -q $(PARALLEL)
 
 test-fast: venv debs
-	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(PY) -m pytest -q -m "not slow and not postgres"
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(PY) -m pytest -q $(PARALLEL) -m "not slow and not postgres"
 
 bench: venv debs
 	$(VENV)/bin/augnet bench all

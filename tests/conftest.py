@@ -32,3 +32,9 @@ def require_tool(name: str) -> str:
     if path is None:
         pytest.skip(f"{name} not installed (make test installs RTKLIB and curl with apt-get)")
     return path
+
+
+def pytest_collection_modifyitems(config, items):
+    """The whole-system runs first: they are the longest in wall-clock time but mostly wait on the real clock,
+    so under `make test`'s two workers (one file per worker) they overlap the CPU-bound simulations."""
+    items.sort(key=lambda item: item.get_closest_marker("system") is None)
