@@ -15,11 +15,11 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
-from math import erf, inf, sqrt
+from math import inf, sqrt
 
 import numpy as np
 
-from augnet.gnss.statistics import chi2_quantile
+from augnet.gnss.statistics import chi2_quantile, normal_cdf
 
 # A permutation in the reduction is only worth doing when it lowers D[j+1] by more than this (relative
 # tolerance against round-off looping; Chang et al. 2005 use the same kind of guard).
@@ -289,16 +289,12 @@ def lambda_search(a_hat: np.ndarray, Q: np.ndarray, m: int = 2) -> LambdaResult:
     return LambdaResult(candidates=cand, norms=norms, Z=Z, D=D)
 
 
-def _phi(x: float) -> float:
-    return 0.5 * (1.0 + erf(x / sqrt(2.0)))
-
-
 def bootstrap_success_rate(D: np.ndarray) -> float:
     """Teunissen's bootstrapped success rate from the decorrelated conditional variances (a lower bound
     of the integer least-squares success rate)."""
     p = 1.0
     for d in np.asarray(D, dtype=float):
-        p *= 2.0 * _phi(1.0 / (2.0 * sqrt(d))) - 1.0
+        p *= 2.0 * normal_cdf(1.0 / (2.0 * sqrt(d))) - 1.0
     return p
 
 
@@ -426,7 +422,7 @@ def partial_fix(a_hat: np.ndarray, Q: np.ndarray, policy: FixPolicy = FixPolicy(
 def trailing_success_rates(D: np.ndarray) -> np.ndarray:
     """The bootstrapped success rate of every trailing block D[k:] at once: products of the
     per-ambiguity factors 2 Phi(1 / (2 sqrt(d))) - 1 (`bootstrap_success_rate` of one ambiguity)."""
-    factors = np.array([2.0 * _phi(1.0 / (2.0 * sqrt(d))) - 1.0 for d in D])
+    factors = np.array([2.0 * normal_cdf(1.0 / (2.0 * sqrt(d))) - 1.0 for d in D])
     return np.cumprod(factors[::-1])[::-1]
 
 

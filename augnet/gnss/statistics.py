@@ -6,12 +6,17 @@ import functools
 import math
 
 
+def normal_cdf(x: float) -> float:
+    """Phi(x), the standard normal distribution function."""
+    return 0.5 * (1.0 + math.erf(x / math.sqrt(2.0)))
+
+
 def normal_quantile(p: float) -> float:
     """The standard normal quantile: x with Phi(x) = p, by bisection on erf (80 halvings of [-10, 10])."""
     lo, hi = -10.0, 10.0
     for _ in range(80):
         mid = 0.5 * (lo + hi)
-        if 0.5 * (1.0 + math.erf(mid / math.sqrt(2.0))) < p:
+        if normal_cdf(mid) < p:
             lo = mid
         else:
             hi = mid

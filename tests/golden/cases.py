@@ -16,6 +16,7 @@ from typing import Callable
 
 import numpy as np
 
+from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
 from tests.golden import probes
 
 # Simulated centre run: seconds of network-70km from a cold start (first fixes come within the first
@@ -306,7 +307,7 @@ def _augnet_vrs_case(folder: Path, at: str, epochs: int | None) -> tuple[list[di
 
 
 def _vrs_epoch_record(ep, mode: str, corrected: int) -> dict:
-    lam = 299792458.0 / np.asarray(ep.freq_hz, float)
+    lam = SPEED_OF_LIGHT_M_S / np.asarray(ep.freq_hz, float)
     return {"mode": mode, "corrected": int(corrected), "sats": [str(s) for s in ep.sats],
             "codes": [[str(c) for c in row] for row in ep.codes], "lli": np.asarray(ep.lli).astype(int).tolist(),
             "vrs_code": tenth_mm_rows(ep.code_m), "vrs_phase": tenth_mm_rows(np.asarray(ep.phase_cyc) * lam)}
