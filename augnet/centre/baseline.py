@@ -187,7 +187,6 @@ class BaselineSolver:
             s = str(s)
             if s in slips.new_arc:
                 self.state.remove([s])
-                self.slips.start_arc(s)
                 self.ambiguities.forget(s)
                 self.ionosphere.activity.forget(s)
                 add_satellite(self.state, self.block, s, self.ionosphere.state_prior_m2(s, mapping[k]), n0[k, 0],

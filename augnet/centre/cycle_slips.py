@@ -14,7 +14,7 @@ geometry-free phase the slips that keep the wide lane (e.g. 9/7, 1/0 cycles on L
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -33,9 +33,10 @@ GF_SLIP_SIGMAS = 5.0
 GF_MIN_RESIDUALS = 3
 GF_RMS_EPOCHS = 30.0
 # Melbourne-Wuebbena against its running arc mean: 5 sigma of the arc's scatter, at least 2 wide-lane cycles
-# (NetRS C1/P2 at 30 s scatter ~0.25 cycles with multipath tails to ~2.5; geodetic code at 1 Hz ~0.2-0.3).
-MW_SLIP_SIGMAS = 5.0
-MW_SLIP_FLOOR_CYCLES = 2.0
+# (NetRS C1/P2 at 30 s scatter ~0.25 cycles with multipath tails to ~2.5; looser than combinations.py's 1 Hz
+# tracker, whose 1-cycle floor such 30 s tails would trip).
+MW_ARC_SLIP_SIGMAS = 5.0
+MW_ARC_SLIP_FLOOR_CYCLES = 2.0
 MW_MIN_EPOCHS = 3  # the arc's scatter is not known before this many epochs (the floor alone applies)
 
 
@@ -69,7 +70,7 @@ class _Track:
                 return True
         if self.mw_n > 0 and np.isfinite(mw):
             sigma = math.sqrt(self.mw_m2 / (self.mw_n - 1)) if self.mw_n >= MW_MIN_EPOCHS else 0.0
-            if abs(mw - self.mw_mean) > max(MW_SLIP_FLOOR_CYCLES, MW_SLIP_SIGMAS * sigma):
+            if abs(mw - self.mw_mean) > max(MW_ARC_SLIP_FLOOR_CYCLES, MW_ARC_SLIP_SIGMAS * sigma):
                 return True
         return False
 
@@ -90,12 +91,8 @@ class _Track:
 @dataclass
 class _Arc:
     t_last: float = -math.inf
-    a: _Track | None = None
-    b: _Track | None = None
-
-    def __post_init__(self):
-        self.a = self.a or _Track()
-        self.b = self.b or _Track()
+    a: _Track = field(default_factory=_Track)
+    b: _Track = field(default_factory=_Track)
 
 
 @dataclass(frozen=True)
@@ -113,7 +110,6 @@ class CycleSlipDetector:
     def __init__(self, max_gap_s: float):
         self.max_gap_s = max_gap_s
         self._arcs: dict[str, _Arc] = {}
-        self._fresh: set[str] = set()  # arcs the last `detect` started (with its epoch in them)
 
     def detect(self, t: float, a: StationEpoch, b: StationEpoch, freq_hz: np.ndarray, carried) -> Slips:
         """Slips and new arcs of the satellites of `a` (and `b`, the same ones); `carried`: satellites the filter
@@ -128,13 +124,12 @@ class CycleSlipDetector:
         lli = ((a.lli & 1).any(axis=1)) | ((b.lli & 1).any(axis=1))
         slipped: set[str] = set()
         new_arc: set[str] = set()
-        self._fresh = new_arc
         for k, s in enumerate(a.sats):
             s = str(s)
             arc = self._arcs.get(s)
             if arc is None or s not in carried or t - arc.t_last > self.max_gap_s:
                 new_arc.add(s)
-                self._arcs[s] = arc = _Arc()
+                self._arcs[s] = arc = _Arc()  # the previous arc is forgotten; this epoch starts the new one
             else:
                 jump_a = arc.a.slipped(t, gf_a[k], mw_a[k])
                 jump_b = arc.b.slipped(t, gf_b[k], mw_b[k])
@@ -148,11 +143,6 @@ class CycleSlipDetector:
             arc.a.add(t, gf_a[k], mw_a[k])
             arc.b.add(t, gf_b[k], mw_b[k])
         return Slips(slipped, new_arc, gf_b - gf_a)
-
-    def start_arc(self, sat: str) -> None:
-        """A new arc forgets the satellite's previous one (an arc `detect` just started keeps its first epoch)."""
-        if sat not in self._fresh:
-            self._arcs[sat] = _Arc()
 
     def seen(self, sats, t: float) -> None:
         for s in sats:

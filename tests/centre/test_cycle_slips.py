@@ -38,8 +38,6 @@ def _run(dt, n, slip_at=None, slip=(0, 0), reset_at=None, lli_at=None, iono_rate
         a = _epoch("A", t, rho + 30.0, iono + 0.1, 500, 400, rng)
         b = _epoch("B", t, rho, iono, n1, n2, rng, lli=1 if e == lli_at else 0)
         res = det.detect(t, a, b, F[None], carried={"G01"} if e else set())
-        for s in res.new_arc:
-            det.start_arc(s)
         det.seen(a.sats, t)
         if res.slipped:
             flagged.append(e)
