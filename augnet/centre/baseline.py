@@ -35,6 +35,7 @@ from augnet.centre.observations import StationEpoch
 from augnet.centre.reference_satellites import ReferenceSatellites, pair_with_references
 from augnet.centre.satellite_geometry import SatelliteGeometry, satellite_geometry
 from augnet.centre.single_differences import SingleDifferences, above_mask, common_dual_frequency
+from augnet.gnss.antex import ReceiverAntenna
 from augnet.gnss.ephemeris import NavigationData
 
 __all__ = ["BaselineConfig", "BaselineEpoch", "BaselineSolver"]  # BaselineConfig: the settings, imported here too
@@ -85,8 +86,10 @@ def _code_sigma_m(cfg: BaselineConfig) -> float:
 class BaselineSolver:
     """Integer ambiguities and DD residuals between stations a and b, epoch after epoch."""
 
-    def __init__(self, name_a: str, xyz_a_m, name_b: str, xyz_b_m, config: BaselineConfig | None = None):
+    def __init__(self, name_a: str, xyz_a_m, name_b: str, xyz_b_m, config: BaselineConfig | None = None,
+                 antenna_a: ReceiverAntenna | None = None, antenna_b: ReceiverAntenna | None = None):
         self.name_a = name_a
+        self.antenna = {"a": antenna_a, "b": antenna_b}  # ANTEX calibrations (None: phase centre at the ARP)
         self.name_b = name_b
         self.xyz_a = np.asarray(xyz_a_m, float)
         self.xyz_b = np.asarray(xyz_b_m, float)
@@ -160,9 +163,11 @@ class BaselineSolver:
             return None
         t = ep_a.t_gpst
         if geom_a is None:
-            geom_a = satellite_geometry(ep_a.sats, t, self.xyz_a, nav, ep_a.code_m[:, 0], self.clock["a"])
+            geom_a = satellite_geometry(ep_a.sats, t, self.xyz_a, nav, ep_a.code_m[:, 0], self.clock["a"],
+                                        self.antenna["a"], ep_a.codes)
         if geom_b is None:
-            geom_b = satellite_geometry(ep_b.sats, t, self.xyz_b, nav, ep_b.code_m[:, 0], self.clock["b"])
+            geom_b = satellite_geometry(ep_b.sats, t, self.xyz_b, nav, ep_b.code_m[:, 0], self.clock["b"],
+                                        self.antenna["b"], ep_b.codes)
         ga, gb = geom_a.subset(ia), geom_b.subset(ib)
         self.clock["a"], self.clock["b"] = ga.clock_s, gb.clock_s
         return above_mask(a, b, ga, gb, self.cfg.elevation_mask_deg)

@@ -27,6 +27,9 @@ def vrs(
     master: Optional[str] = typer.Option(None, "--master",
                                          help="network master station (default: the most central)"),
     name: str = typer.Option("VRS", "--name", help="marker name of the virtual station"),
+    antex: Optional[Path] = typer.Option(None, "--antex",
+                                         help="ANTEX file: model the stations' antennas (RINEX header types); "
+                                              "the VRS is then for a null antenna (ADVNULLANTENNA)"),
     opt: Optional[List[str]] = typer.Option(None, "--opt", metavar="NAME=VALUE",
                                             help="a network engine setting (docs/options/centre.md); repeatable"),
 ) -> None:
@@ -50,7 +53,7 @@ def vrs(
 
     try:
         result, lines = run_vrs(record, at, out, nav=nav, coords=coords, exclude=exclude or (), master=master,
-                                marker_name=name, progress=progress, config=config)
+                                marker_name=name, progress=progress, config=config, antex=antex)
     except PostprocessError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(2)

@@ -10,6 +10,9 @@ connected). Each baseline resolves its own ambiguities (`baseline.py`); the netw
   re-referencing them to one reference satellite per system, giving DD residuals (dispersive and
   non-dispersive) of every station against the master: the input of the interpolation;
 - pools the ionosphere's rate and the day's level over every baseline (`ionosphere_prior.py`);
+- models each station's receiver antenna where its ANTEX calibration is given (`antennas`): the phase-centre
+  corrections enter the single differences, so the DD residuals refer to the antenna reference points, and
+  `NetworkEpoch.antenna_m` carries them to the VRS (which takes them out of its master's observations);
 - hands each baseline, for the next epoch, ionosphere hints for the satellites it has not fixed
   (`ionosphere_hints.py`) and the prediction of the single-layer ionosphere model fitted over every baseline's
   fixed satellites (`ionosphere_model.py`): the prior of their integer decision.
@@ -31,6 +34,7 @@ from augnet.centre.ionosphere_prior import share_network_ionosphere
 from augnet.centre.integrity import Alarm, IntegrityMonitor
 from augnet.centre.observations import StationEpoch
 from augnet.centre.satellite_geometry import SatelliteGeometry, satellite_geometry
+from augnet.gnss.antex import ReceiverAntenna
 from augnet.gnss.ephemeris import NavigationData
 from augnet.gnss.geometry import ecef_to_enu
 
@@ -85,6 +89,20 @@ class NetworkEpoch:
     clocks: dict[str, float] = field(default_factory=dict)  # receiver clock estimates [s] per station
     excluded: set[str] = field(default_factory=set)  # satellites the integrity monitor took out
     alarms: list[Alarm] = field(default_factory=list)  # alarms raised this epoch
+    # per modelled station: (sats (S,), (S, 2) phase-centre correction e . PCO - PCV [m]) of this epoch
+    antenna_m: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+
+    def antenna_correction(self, ep: StationEpoch) -> np.ndarray | None:
+        """(S, 2) phase-centre correction of a station epoch's satellites (0 for any not modelled this epoch);
+        None when the station's antenna is not modelled."""
+        got = self.antenna_m.get(ep.station)
+        if got is None:
+            return None
+        sats, corr = got
+        pos = {str(s): k for k, s in enumerate(sats)}
+        idx = np.array([pos.get(str(s), -1) for s in ep.sats], dtype=int)
+        out = np.where((idx >= 0)[:, None], corr[np.maximum(idx, 0)], 0.0) if len(idx) else np.zeros((0, 2))
+        return out
 
     def fixed_fraction(self) -> dict[str, float]:
         return {k: (b.fixed_fraction if b is not None else 0.0) for k, b in self.baselines.items()}
@@ -95,8 +113,12 @@ class NetworkSolver:
     residuals of every station against the master."""
 
     def __init__(self, stations: dict[str, np.ndarray], master: str | None = None,
-                 config: BaselineConfig | None = None, edges: list[tuple[str, str]] | None = None):
+                 config: BaselineConfig | None = None, edges: list[tuple[str, str]] | None = None,
+                 antennas: dict[str, ReceiverAntenna] | None = None):
+        """`antennas`: the receiver antenna calibration of each station to model (`augnet.gnss.antex`); stations
+        without one keep their phase centre at the ARP (no correction)."""
         self.names = list(stations)
+        self.antennas = dict(antennas or {})
         self.xyz = np.array([np.asarray(stations[n], float) for n in self.names])
         self.master = master if master is not None else self._central_station()
         if edges is None:
@@ -107,7 +129,8 @@ class NetworkSolver:
         self.edges = idx_edges
         self.triangles = triangles(idx_edges)
         self.cfg = config or BaselineConfig()
-        self.solvers = {(i, j): BaselineSolver(self.names[i], self.xyz[i], self.names[j], self.xyz[j], self.cfg)
+        self.solvers = {(i, j): BaselineSolver(self.names[i], self.xyz[i], self.names[j], self.xyz[j], self.cfg,
+                                               self.antennas.get(self.names[i]), self.antennas.get(self.names[j]))
                         for i, j in idx_edges}
         m = self.names.index(self.master)
         self.order = [m] + [i for i in range(len(self.names)) if i != m]
@@ -141,7 +164,8 @@ class NetworkSolver:
             station_xyz_m=self.xyz[rows], refs=refs, sats=sats, dd_iono_m=iono[rows], dd_trop_m=trop[rows],
             baselines={self.solvers[e].name: r for e, r in results.items()}, misclosures=misclosures,
             present=sorted(present), clocks=dict(self.clocks), excluded=set(excluded),
-            alarms=self.integrity.drain())
+            alarms=self.integrity.drain(),
+            antenna_m={n: (g.sats, g.antenna_m) for n, g in geom.items() if g.antenna_m is not None})
 
     def _geometry(self, epochs, present, nav) -> dict[str, SatelliteGeometry]:
         """Each present station's satellite geometry, computed once for all its baselines; the receiver clocks are
@@ -150,7 +174,8 @@ class NetworkSolver:
         pos = {n: i for i, n in enumerate(self.names)}
         for n in present:
             ep = epochs[n]
-            geom[n] = satellite_geometry(ep.sats, ep.t_gpst, self.xyz[pos[n]], nav, ep.code_m[:, 0], self.clocks[n])
+            geom[n] = satellite_geometry(ep.sats, ep.t_gpst, self.xyz[pos[n]], nav, ep.code_m[:, 0], self.clocks[n],
+                                         self.antennas.get(n), ep.codes)
             self.clocks[n] = geom[n].clock_s
         return geom
 

@@ -24,7 +24,19 @@ Station coordinates come from the RINEX headers (APPROX POSITION XYZ plus ANTENN
 coordinates file (`read_coordinates`): one station a line, `NAME X Y Z` (ECEF metres) or
 `NAME LAT LON H` (degrees, degrees, ellipsoidal metres), blank- or comma-separated, `#` starts a comment.
 The network needs surveyed coordinates: header approximate positions of real stations usually are, but a
-coordinates file is the way to be sure. Antenna phase-centre offsets and variations are not modelled.
+coordinates file is the way to be sure.
+
+Antennas. With an ANTEX file (`antex=`, `augnet vrs --antex`), each station's receiver antenna is looked up by
+its RINEX header's ANT # / TYPE (type and radome; radome NONE's calibration when its own is missing, said in
+the notes) and its phase-centre offsets and variations are modelled (`augnet.gnss.antex`): the network's DD
+residuals refer to the antenna reference points, and the VRS is written for a null antenna at the point:
+RINEX ANT # / TYPE `ADVNULLANTENNA`, ANTENNA: DELTA H/E/N zero, the point being the antenna reference point
+and the phase centre (no offset, no variations). That is the convention of commercial VRS services: Trimble's
+`ADVNULLANTENNA` in RTCM 1007/1008/1033 tells a rover the antenna calibration is already in the observations,
+so it applies its own antenna model only (use-snip.com knowledge base "What is ADVNULLANTENNA?"; EUREF mail
+6566 of 2012-08-29 on the same option at reference stations). A station whose antenna is not in the file is
+left uncorrected; then the header keeps an empty antenna type and a comment says so. Without an ANTEX file
+nothing is modelled and the VRS carries its master's antenna (empty antenna type), as before.
 """
 
 from __future__ import annotations
@@ -45,6 +57,7 @@ from augnet.centre.baseline_config import BaselineConfig
 from augnet.centre.network import NetworkSolver
 from augnet.centre.observations import StationEpoch, from_obsdata
 from augnet.centre.vrs import geometry_many, synthesize
+from augnet.gnss.antex import NULL_ANTENNA, AntexError, ReceiverAntenna, antennas_for, read_antex
 from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
 from augnet.gnss.ephemeris import NavigationData
 from augnet.gnss.geometry import ecef_to_geodetic, enu_to_ecef, geodetic_deg_to_ecef
@@ -173,6 +186,7 @@ class Station:
     obs: ObsData  # RINEX 3 type names
     xyz_m: np.ndarray  # antenna reference point, ECEF
     source: str  # where the coordinates came from
+    antenna_type: str = ""  # RINEX ANT # / TYPE: type (16 characters) and radome
 
 
 @dataclass
@@ -268,7 +282,7 @@ def load_network(folder: str | os.PathLike, nav: str | os.PathLike | None = None
                                    "file (give --coords)")
         h, e, n = data.header.antenna_delta_hen_m
         xyz = np.asarray(marker_xyz, float) + enu_to_ecef(np.array([e, n, h], float), marker_xyz).reshape(3)
-        stations.append(Station(name, p, data, xyz, source))
+        stations.append(Station(name, p, data, xyz, source, data.header.antenna_type))
     unknown = [e for e in exclude if e.upper() not in {x.split(":")[0].upper() for x in excluded}]
     if unknown:
         raise PostprocessError(f"--exclude {' '.join(unknown)}: no such station in {folder}")
@@ -333,6 +347,12 @@ class VrsResult:
     misclosures: int = 0
     seconds_wall: float = 0.0
     notes: list[str] = field(default_factory=list)
+    antennas_modelled: list[str] = field(default_factory=list)  # stations whose antenna was corrected (ANTEX)
+
+    @property
+    def null_antenna(self) -> bool:
+        """The VRS refers to a null antenna at the point: every station's antenna was modelled."""
+        return bool(self.antennas_modelled) and len(self.antennas_modelled) == len(self.stations)
 
     @property
     def network_epochs(self) -> int:
@@ -355,9 +375,14 @@ def _station_clocks(net: NetworkSolver) -> dict[str, float]:
 
 
 def single_base_epoch(master: StationEpoch, master_xyz_m, point_ecef_m, nav: NavigationData,
-                      clock_s: float) -> StationEpoch:
+                      clock_s: float, antenna_m: np.ndarray | None = None) -> StationEpoch:
     """The master's observations moved geometrically to the point, no atmospheric corrections (the VRS
-    synthesis of `vrs.py` with zero interpolated corrections, for every satellite)."""
+    synthesis of `vrs.py` with zero interpolated corrections, for every satellite). `antenna_m` (S, 2): the
+    master's phase-centre correction, to refer its observations to its ARP first (a null antenna VRS)."""
+    if antenna_m is not None:
+        master = StationEpoch(master.station, master.t_gpst, master.sats, master.code_m + antenna_m,
+                              master.phase_cyc + antenna_m * master.freq_hz / C, master.lli, master.cnr_dbhz,
+                              master.freq_hz, master.codes)
     g_m, trop_m, _ = geometry_many(master.sats, master.t_gpst, clock_s, master_xyz_m, nav)
     g_v, trop_v, el_v = geometry_many(master.sats, master.t_gpst, clock_s, point_ecef_m, nav)
     shift = ((g_v - g_m) + (trop_v - trop_m))[0]  # (S,)
@@ -370,16 +395,30 @@ def single_base_epoch(master: StationEpoch, master_xyz_m, point_ecef_m, nav: Nav
     return ep.subset(use)
 
 
+def station_antennas(stations: list[Station], antex) -> tuple[dict[str, ReceiverAntenna], list[str]]:
+    """Each station's calibration from an ANTEX file (a path or a read `AntexFile`) by its header's antenna
+    type, and notes on those not found or on radome NONE's values."""
+    if antex is None:
+        return {}, []
+    if not hasattr(antex, "receivers"):
+        try:
+            antex = read_antex(antex)
+        except AntexError as exc:
+            raise PostprocessError(f"--antex: {exc}") from None
+    return antennas_for(antex, {s.name: s.antenna_type for s in stations})
+
+
 def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress=None,
-            config: BaselineConfig | None = None) -> VrsResult:
+            config: BaselineConfig | None = None, antex=None) -> VrsResult:
     """Solve the network epoch by epoch (with the engine's settings `config`, default when None) and synthesise
-    the VRS at the point."""
+    the VRS at the point. `antex`: an ANTEX file (path or `AntexFile`) for the stations' antennas."""
     t_wall = time.perf_counter()
     point = np.asarray(point_ecef_m, float).reshape(1, 3)
     stations = {s.name: s.xyz_m for s in inp.stations}
     if master is not None and master not in stations:
         raise PostprocessError(f"--master {master}: not one of the stations ({', '.join(stations)})")
-    net = NetworkSolver(stations, master=master, config=config)
+    antennas, antenna_notes = station_antennas(inp.stations, antex)
+    net = NetworkSolver(stations, master=master, config=config, antennas=antennas)
     times, rows = align_epochs(inp.stations)
     by_name = {s.name: s for s in inp.stations}
     summaries = {s.name: BaselineSummary(s.name, s.length_m / 1e3) for s in net.solvers.values()}
@@ -441,7 +480,8 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
             ep = ep.subset(keep)
             mode = "network"
         else:
-            ep = single_base_epoch(eps[vmaster], stations[vmaster], point, inp.nav, clocks.get(vmaster, 0.0))
+            ep = single_base_epoch(eps[vmaster], stations[vmaster], point, inp.nav, clocks.get(vmaster, 0.0),
+                                   ne.antenna_correction(eps[vmaster]))
             corrected = set()
             mode = "single-base"
         ep.lli = ep.lli.copy()
@@ -467,7 +507,8 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
     return VrsResult(point_ecef_m=point[0], stations=inp.stations, excluded=inp.excluded, master=net.master,
                      vrs_masters=masters, epochs=epochs, epoch_mode=modes, corrected_sats=n_corr,
                      times_processed=len(times), skipped_epochs=skipped, baselines=summaries,
-                     misclosures=misclosures, seconds_wall=time.perf_counter() - t_wall)
+                     misclosures=misclosures, seconds_wall=time.perf_counter() - t_wall, notes=antenna_notes,
+                     antennas_modelled=sorted(antennas))
 
 
 # --------------------------------------------------------------------------------------------
@@ -501,9 +542,11 @@ def to_obsdata(result: VrsResult, marker_name: str = VRS_MARKER_NAME) -> ObsData
         "single-base (geometric shift only, no atmosphere corr.)",
         "receiver clock and ambiguities are the VRS master's",
     ]
+    comments += _antenna_comments(result)
     header = ObsHeader(program=PROGRAM, run_by="augnet", marker_name=marker_name, marker_type="NON_PHYSICAL",
                        observer="augnet", agency="augnet network RTK", receiver_type="AUGNET VRS",
-                       receiver_version="1", antenna_type="", approx_position_m=tuple(result.point_ecef_m),
+                       receiver_version="1", antenna_type=_vrs_antenna_type(result),
+                       approx_position_m=tuple(result.point_ecef_m),
                        obs_types=obs_types, signal_strength_unit="DBHZ", interval_s=result.interval_s(),
                        time_of_first_obs=eps[0].t_gpst, time_of_last_obs=eps[-1].t_gpst, time_system="GPS",
                        comments=comments)
@@ -521,6 +564,20 @@ def to_obsdata(result: VrsResult, marker_name: str = VRS_MARKER_NAME) -> ObsData
                 data.lli["L" + rc][i, j] = ep.lli[k, f] & 0x7
                 data.obs["S" + rc][i, j] = ep.cnr_dbhz[k, f]
     return data
+
+
+def _vrs_antenna_type(result: VrsResult) -> str:
+    """RINEX ANT # / TYPE of the VRS: the null antenna when every station's antenna was modelled."""
+    return f"{NULL_ANTENNA:<16}NONE" if result.null_antenna else ""
+
+
+def _antenna_comments(result: VrsResult) -> list[str]:
+    if result.null_antenna:
+        return ["antenna: null antenna at the point (station PCO/PCV",
+                "removed with ANTEX); rover applies only its own model"]
+    if result.antennas_modelled:
+        return [f"antenna PCO/PCV modelled at {', '.join(result.antennas_modelled)} only"[:60]]
+    return []
 
 
 def write_vrs(result: VrsResult, path: str | os.PathLike, marker_name: str = VRS_MARKER_NAME) -> Path:
@@ -543,6 +600,12 @@ def summary_lines(result: VrsResult) -> list[str]:
                      f"coordinates from {s.source}")
     for x in result.excluded:
         lines.append(f"not used: {x}")
+    if result.antennas_modelled:
+        lines.append("antenna models (ANTEX): " + ", ".join(
+            f"{s.name} {s.antenna_type.strip() or '?'}" for s in result.stations if s.name in result.antennas_modelled)
+            + ("; VRS for a null antenna (ADVNULLANTENNA)" if result.null_antenna else ""))
+    for x in result.notes:
+        lines.append(f"note: {x}")
     lines.append(f"network master {result.master}; epochs shared by >= {MIN_STATIONS_PER_EPOCH} stations: "
                  f"{result.times_processed}; VRS epochs written: {len(result.epochs)}"
                  + (f" ({result.skipped_epochs} had nothing to write)" if result.skipped_epochs else ""))
@@ -585,10 +648,10 @@ def summary_lines(result: VrsResult) -> list[str]:
 
 def run_vrs(record: str | os.PathLike, at: str, out: str | os.PathLike, nav=None, coords=None,
             exclude=(), master: str | None = None, marker_name: str = VRS_MARKER_NAME,
-            progress=None, config: BaselineConfig | None = None) -> tuple[VrsResult, list[str]]:
+            progress=None, config: BaselineConfig | None = None, antex=None) -> tuple[VrsResult, list[str]]:
     """The whole post-processing: read, solve, synthesise, write. Returns the result and its summary."""
     point = parse_point(at)
     inp = load_network(record, nav=nav, coords=coords, exclude=tuple(exclude))
-    result = process(inp, point, master=master, progress=progress, config=config)
+    result = process(inp, point, master=master, progress=progress, config=config, antex=antex)
     write_vrs(result, out, marker_name)
     return result, summary_lines(result)

@@ -3,7 +3,8 @@ track on the same two signals, above the mask, with the known geometry and the t
 
 The station coordinates are surveyed, so g = rho - c*dts (satellite positions at transmission, Sagnac included,
 satellite and receiver clocks) is right to the millimetre and the SD hold only ambiguities, atmosphere,
-multipath and noise.
+multipath and noise. Where a station's antenna is modelled (`SatelliteGeometry.antenna_m`), its observations
+get the phase-centre correction first, so both refer to the antenna reference points.
 """
 
 from __future__ import annotations
@@ -76,5 +77,9 @@ def above_mask(a: StationEpoch, b: StationEpoch, ga: SatelliteGeometry, gb: Sate
     phase_b = b.phase_cyc * lam - (gb.g_m + gb.trop_model_m)[:, None]
     code_a = a.code_m - (ga.g_m + ga.trop_model_m)[:, None]
     code_b = b.code_m - (gb.g_m + gb.trop_model_m)[:, None]
+    for g, phase, code in ((ga, phase_a, code_a), (gb, phase_b, code_b)):
+        if g.antenna_m is not None:  # observations referred to the ARP: phase centre offset and variations out
+            phase += g.antenna_m
+            code += g.antenna_m
     return SingleDifferences(a.sats, a, b, ga, gb, f, lam, (f[:, 0] / f[:, 1]) ** 2, phase_b - phase_a,
                              code_b - code_a)

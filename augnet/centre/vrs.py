@@ -14,6 +14,12 @@ differences against it have integer ambiguities, and moving the point (a train r
 steps the observations by the geometric shift only: the rover sees a new base position with the same
 ambiguities.
 
+Antennas. The network's residuals refer to the stations' antenna reference points when their antennas are
+modelled (`NetworkEpoch.antenna_m`); the master's observations then get its phase-centre correction too, so
+the VRS is that of a null antenna at the point (phase centre at the point, no variations: RTCM 1033 and RINEX
+antenna type `ADVNULLANTENNA`, what commercial VRS send), and a rover applies its own antenna model only.
+Without antenna models the VRS carries the master's antenna, as before.
+
 Satellites without network corrections (not fixed on the baselines around the point) are left out of a
 VRS, unless the point is within `UNCORRECTED_MAX_DISTANCE_M` of its master, where the single-base error is
 small (their absence is what the quality flags report).
@@ -348,6 +354,8 @@ def synthesize(net: NetworkEpoch, station_epochs: dict[str, StationEpoch], point
         name = net.stations[mrow]
         ep = station_epochs[name]
         ep = ep.subset(~np.isin(ep.sats, list(net.excluded))) if net.excluded else ep
+        ant = net.antenna_correction(ep)  # the master's phase-centre correction: observations referred to its ARP
+        obs_code = ep.code_m if ant is None else ep.code_m + ant
         who = np.flatnonzero(master_idx == mrow)
         col = np.searchsorted(sats, ep.sats)
         g_all, trop_all, _ = plan.station_geometry(mrow, gcols)
@@ -371,8 +379,9 @@ def synthesize(net: NetworkEpoch, station_epochs: dict[str, StationEpoch], point
         f = ep.freq_hz
         mu = (f[:, 0:1] / f) ** 2  # (s, 2)
         lam = C / f
-        pc = ep.code_m[None] + shift[..., None] + mu[None] * di[..., None]
-        pl = ep.phase_cyc[None] + (shift[..., None] - mu[None] * di[..., None]) / lam[None]
+        obs_phase = ep.phase_cyc if ant is None else ep.phase_cyc + ant / lam
+        pc = obs_code[None] + shift[..., None] + mu[None] * di[..., None]
+        pl = obs_phase[None] + (shift[..., None] - mu[None] * di[..., None]) / lam[None]
         u3 = use[..., None]
         code[np.ix_(who, col)] = np.where(u3, pc, np.nan)
         phase[np.ix_(who, col)] = np.where(u3, pl, np.nan)
