@@ -5,6 +5,11 @@ Sans-IO: the service feeds it station stream bytes with `feed(station, data, now
 its sink, and queues the correction model and alarms in `outbox` for the service to publish on the bus.
 `CentreStreamFactory` adapts it to the NTRIP caster's stream-factory interface (a VRS mountpoint's client
 gets a session once its GGA is known; `update_position` moves its virtual station).
+
+Antennas: with an ANTEX file (`antex=`), each station's antenna is modelled from the type its RTCM 1033
+descriptor gives (or `antenna_types`, which take precedence: a station that sends no 1033), so the network's
+residuals refer to the antenna reference points and the VRS is for a null antenna, as its 1033
+(`ADVNULLANTENNA`, vrs_stream.py) says. Without one nothing is modelled.
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ from augnet.centre.ingest import EpochAligner, StationDecoder
 from augnet.centre.network import NetworkEpoch, NetworkSolver
 from augnet.centre.vrs import VrsEpoch, VrsPlan, synthesize
 from augnet.centre.vrs_stream import VrsStreamEncoder
+from augnet.gnss.antex import AntexFile, read_antex
 from augnet.gnss.ephemeris import Ephemeris, NavigationData
 from augnet.gnss.geometry import geodetic_deg_to_ecef
 
@@ -75,8 +81,12 @@ class CentreEngine:
     def __init__(self, stations: dict[str, np.ndarray], t_ref_gpst: float, network_name: str = "line",
                  master: str | None = None, config: BaselineConfig | None = None,
                  ephemerides: list[Ephemeris] | None = None, msm_level: int = 7,
-                 vrs_before_network: bool = True):
+                 vrs_before_network: bool = True, antex: AntexFile | str | None = None,
+                 antenna_types: dict[str, str] | None = None):
         self.network_name = network_name
+        self.antex = read_antex(antex) if isinstance(antex, (str, bytes)) or hasattr(antex, "__fspath__") else antex
+        self.antenna_types: dict[str, str] = {}  # station -> antenna type in use (1033 or configured)
+        self.antenna_notes: list[str] = []
         self.stations = {k: np.asarray(v, float) for k, v in stations.items()}
         self.decoders = {name: StationDecoder(name, t_ref_gpst) for name in stations}
         self.aligner = EpochAligner(list(stations))
@@ -110,6 +120,9 @@ class CentreEngine:
         self._unplanned: dict[str, None] = {}  # sessions opened or moved since the plan was made
         self._last_eps: dict = {}
         self._interval_s = 1.0
+        self._configured_antennas = dict(antenna_types or {})
+        for name, t in self._configured_antennas.items():
+            self._use_antenna(name, t)
 
     # --- inputs ---------------------------------------------------------------------------------
 
@@ -118,11 +131,29 @@ class CentreEngine:
         if dec is None:
             return
         epochs = dec.feed(data)
+        if (dec.antenna_descriptor is not None and station not in self._configured_antennas
+                and self.antenna_types.get(station) != dec.antenna_descriptor):
+            self._use_antenna(station, dec.antenna_descriptor)
         new = dec.take_ephemerides()
         if new:
             self._add_ephemerides(new)
         for ep in epochs:
             self.aligner.add(ep, now)
+
+    def _use_antenna(self, station: str, antenna_type: str) -> None:
+        """Model the station's antenna of this type from the next epoch (nothing without an ANTEX file)."""
+        self.antenna_types[station] = antenna_type
+        if self.antex is None or station not in self.stations:
+            return
+        ant = self.antex.receiver(antenna_type, warn=False)
+        if ant is None:
+            self.antenna_notes.append(f"{station}: antenna {antenna_type.strip()!r} not in the ANTEX file: "
+                                      "not modelled")
+        elif ant.radome_fallback:
+            self.antenna_notes.append(f"{station}: {antenna_type.strip()!r}: radome NONE's calibration")
+        if self.epochs_solved:
+            log.warning("%s: antenna %r from epoch %d on", station, antenna_type, self.epochs_solved)
+        self.network.set_antenna(station, ant)
 
     def _add_ephemerides(self, ephs: list[Ephemeris]) -> None:
         changed = False

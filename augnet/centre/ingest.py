@@ -1,8 +1,9 @@
 """From station RTCM streams to aligned network epochs (sans-IO: bytes and times in, epochs out).
 
 `StationDecoder` turns one station's byte stream into complete `StationEpoch`s (all MSMs of an epoch,
-closed by the multiple-message bit or by the next epoch), broadcast ephemerides and the antenna reference
-point. Corrupt frames are counted and skipped by the framing layer; a message that passes its CRC but does
+closed by the multiple-message bit or by the next epoch), broadcast ephemerides, the antenna reference
+point (1005/1006) and the antenna and receiver descriptors (1033: the antenna type the centre looks up in an
+ANTEX file, IGS names as in RINEX ANT # / TYPE, e.g. `TRM41249.00     NONE`). Corrupt frames are counted and skipped by the framing layer; a message that passes its CRC but does
 not decode is counted and skipped here.
 
 `EpochAligner` gathers the stations' epochs by time tag and releases an epoch when every station that is
@@ -54,6 +55,10 @@ class StationDecoder:
         self.reader = MessageReader()
         self.stats = DecoderStats()
         self.arp_ecef: np.ndarray | None = None
+        self.antenna_height_m: float | None = None  # 1006: ARP above the marker (the ARP is what 1005/1006 give)
+        self.antenna_descriptor: str | None = None  # 1033 DF030: antenna type (and radome)
+        self.antenna_setup_id: int | None = None  # 1033 DF031
+        self.receiver_descriptor: str | None = None  # 1033 DF228
         self.ephemerides: list[Ephemeris] = []  # decoded since the last `take_ephemerides`
         self._pending: _Pending | None = None
         self._last_lock: dict[tuple[str, str], float] = {}
@@ -76,6 +81,12 @@ class StationDecoder:
                     elif msg.msg_type in (1005, 1006):
                         f = msg.fields
                         self.arp_ecef = np.array([float(f["DF025"]), float(f["DF026"]), float(f["DF027"])])
+                        if msg.msg_type == 1006:
+                            self.antenna_height_m = float(f["DF028"])
+                    elif msg.msg_type == 1033:
+                        self.antenna_descriptor = msg.text("DF030")
+                        self.antenna_setup_id = int(msg.fields.get("DF031", 0))
+                        self.receiver_descriptor = msg.text("DF228")
             except (ValueError, KeyError, IndexError):
                 self.stats.undecodable += 1
         return done

@@ -93,16 +93,17 @@ class NetworkEpoch:
     antenna_m: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
 
     def antenna_correction(self, ep: StationEpoch) -> np.ndarray | None:
-        """(S, 2) phase-centre correction of a station epoch's satellites (0 for any not modelled this epoch);
-        None when the station's antenna is not modelled."""
+        """(S, 2) phase-centre correction of a station epoch's satellites (NaN for any this epoch did not see:
+        a VRS leaves them out rather than carry the station's antenna); None when its antenna is not modelled."""
         got = self.antenna_m.get(ep.station)
         if got is None:
             return None
         sats, corr = got
         pos = {str(s): k for k, s in enumerate(sats)}
         idx = np.array([pos.get(str(s), -1) for s in ep.sats], dtype=int)
-        out = np.where((idx >= 0)[:, None], corr[np.maximum(idx, 0)], 0.0) if len(idx) else np.zeros((0, 2))
-        return out
+        if not len(idx) or not len(sats):
+            return np.full((len(idx), 2), np.nan)
+        return np.where((idx >= 0)[:, None], corr[np.maximum(idx, 0)], np.nan)
 
     def fixed_fraction(self) -> dict[str, float]:
         return {k: (b.fixed_fraction if b is not None else 0.0) for k, b in self.baselines.items()}
@@ -141,6 +142,20 @@ class NetworkSolver:
         self.iono_model: IonosphereModel | None = None
         self.clocks = {n: 0.0 for n in self.names}
         self.integrity = IntegrityMonitor(self.names)
+
+    def set_antenna(self, name: str, antenna: ReceiverAntenna | None) -> None:
+        """Model (or stop modelling, None) a station's antenna from the next epoch on (a live station's RTCM 1033
+        descriptor may arrive after its first epochs: its residuals step by the correction, millimetres to
+        centimetres, which a fixed satellite's release check may take for a slip)."""
+        if antenna is None:
+            self.antennas.pop(name, None)
+        else:
+            self.antennas[name] = antenna
+        for solver in self.solvers.values():
+            if solver.name_a == name:
+                solver.antenna["a"] = antenna
+            if solver.name_b == name:
+                solver.antenna["b"] = antenna
 
     def _central_station(self) -> str:
         c = self.xyz.mean(axis=0)
