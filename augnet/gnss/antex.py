@@ -183,6 +183,27 @@ class AntexFile:
         return ReceiverAntenna(key, base.frequencies, radome_fallback=True, source=base.source)
 
 
+@dataclass(frozen=True)
+class AntennaSetup:
+    """A receiver's antenna as set up: its calibration (None: phase centre at the ARP) and the ARP's offset from
+    the marker (RINEX ANTENNA: DELTA H/E/N as north, east, up [m]). `correction_m` refers observations to the
+    marker: e . (delta + PCO) - PCV, as RTKLIB's antmodel() with the antenna delta (pos2 ant*-antdel)."""
+
+    antenna: ReceiverAntenna | None
+    delta_neu_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def correction_m(self, azimuth_rad, elevation_rad, sats, codes) -> np.ndarray:
+        az = np.asarray(azimuth_rad, float)
+        el = np.asarray(elevation_rad, float)
+        e_neu = np.stack([np.cos(az) * np.cos(el), np.sin(az) * np.cos(el), np.sin(el)], axis=-1)
+        codes = np.asarray(codes)
+        codes = codes[:, None] if codes.ndim == 1 else codes
+        lever = (e_neu @ np.asarray(self.delta_neu_m, float))[:, None] * (np.char.str_len(codes.astype(str)) > 0)
+        if self.antenna is None:
+            return lever
+        return self.antenna.correction_m(az, el, sats, codes) + lever
+
+
 def split_antenna_type(antenna_type: str, radome: str | None = None) -> tuple[str, str]:
     """('TRM41249.00', 'NONE') from 'TRM41249.00     NONE' (ANTEX/RINEX columns) or from a space-separated
     type and radome; an empty radome is NONE."""
@@ -366,5 +387,5 @@ def antennas_for(antex: AntexFile, types: dict[str, str]) -> tuple[dict[str, Rec
     return out, notes
 
 
-__all__ = ["AntexError", "AntexFile", "FrequencyModel", "NULL_ANTENNA", "ReceiverAntenna", "antennas_for",
+__all__ = ["AntennaSetup", "AntexError", "AntexFile", "FrequencyModel", "NULL_ANTENNA", "ReceiverAntenna", "antennas_for",
            "read_antex", "split_antenna_type"]

@@ -2,7 +2,9 @@
 
     augnet rtk --rover R.obs --base B.obs --nav N.nav --base-pos X,Y,Z|LAT,LON,H --out sol.csv
 
-`--base-pos header` takes the base file's APPROX POSITION.  `--opt NAME=VALUE` (repeatable) sets any
+`--base-pos header` takes the base file's APPROX POSITION.  `--antex FILE` models both receivers' antennas
+from their RINEX headers (ANT # / TYPE looked up in the ANTEX file, ANTENNA: DELTA H/E/N): the base position
+and the solution are then the markers', as RTKLIB's with ant1/ant2-anttype=*.  `--opt NAME=VALUE` (repeatable) sets any
 field of the settings table `RtkOptions` (docs/options/rtk.md), after the flags.  Exit status 0 when every
 epoch was processed (whatever its status), 2 for unusable inputs.
 """
@@ -36,11 +38,14 @@ def rtk(
     hold: Annotated[bool, typer.Option("--hold/--no-hold", help="fix-and-hold")] = True,
     base_kind: Annotated[str, typer.Option("--base-kind", help="auto (the base file's MARKER TYPE: NON_PHYSICAL is a "
                                            "VRS), station, or vrs (estimate the network's residual ionosphere)")] = "auto",
+    antex: Annotated[Path | None, typer.Option("--antex", help="ANTEX file: model base and rover antennas from "
+                                              "their RINEX headers (ANT # / TYPE, DELTA H/E/N); positions are "
+                                              "then the markers'")] = None,
     opt_assignments: Annotated[list[str] | None, typer.Option("--opt", help="NAME=VALUE: any RTK setting "
                                                               "(docs/options/rtk.md); repeatable")] = None,
 ) -> None:
     """Post-process RTK: rover + base RINEX -> solution CSV (time, ECEF, geodetic, status, ratio, sigmas)."""
-    from augnet.onboard.inputs import InputError, load_nav, load_obs, parse_position
+    from augnet.onboard.inputs import InputError, antenna_setup, load_nav, load_obs, parse_position
     from augnet.onboard.postprocess import process
     from augnet.onboard.rtk import RtkOptions
     from augnet.onboard.solution import write_csv
@@ -77,10 +82,22 @@ def rtk(
                 raise InputError("the base file has no usable APPROX POSITION XYZ; give --base-pos")
         else:
             bp = parse_position(base_pos)
+        antennas = {}
+        if antex is not None:
+            from augnet.gnss.antex import AntexError, read_antex
+
+            try:
+                atx = read_antex(antex)
+            except AntexError as exc:
+                raise InputError(f"--antex: {exc}") from None
+            for what, obs in (("base", bas), ("rover", rov)):
+                antennas[what], note = antenna_setup(obs, atx, what)
+                typer.echo(f"augnet rtk: {note}", err=True)
     except InputError as exc:
         typer.echo(f"augnet rtk: {exc}", err=True)
         raise typer.Exit(2)
-    sols = process(rov, bas, navdata, bp, opt, base_is_vrs=None if base_kind == "auto" else base_kind == "vrs")
+    sols = process(rov, bas, navdata, bp, opt, base_is_vrs=None if base_kind == "auto" else base_kind == "vrs",
+                   base_antenna=antennas.get("base"), rover_antenna=antennas.get("rover"))
     counts: dict[str, int] = {}
 
     def counted():

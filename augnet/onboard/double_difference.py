@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from augnet.gnss.antex import AntennaSetup
 from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
 from augnet.onboard.atmosphere import saastamoinen_m
 from augnet.onboard.observations import BAND_FREQ_HZ, SYSTEM_BANDS, EpochObs
@@ -89,8 +90,11 @@ def first_wavelength(system: str) -> float:
     return SPEED_OF_LIGHT_M_S / BAND_FREQ_HZ[(system, SYSTEM_BANDS[system][0])]
 
 
-def zero_differences(obs: EpochObs, rx_m: np.ndarray, sp: SatPositions) -> ZeroDifferences:
-    """Observed minus modelled phase and code of one receiver at position rx_m."""
+def zero_differences(obs: EpochObs, rx_m: np.ndarray, sp: SatPositions,
+                     antenna: AntennaSetup | None = None) -> ZeroDifferences:
+    """Observed minus modelled phase and code of one receiver at position rx_m. With `antenna` (its ANTEX
+    calibration and ARP offset), the observations first get its phase-centre correction, so rx_m is the
+    receiver's marker (`augnet.gnss.antex.AntennaSetup`)."""
     rng, los = geometric_range(np.where(sp.valid[:, None], sp.position_m, rx_m + 1.0), rx_m)
     llh, rot = receiver_frame(rx_m)
     az, el = azimuth_elevation_from(rx_m, rot, np.where(sp.valid[:, None], sp.position_m, rx_m + np.array([0, 0, 1.0])))
@@ -98,6 +102,10 @@ def zero_differences(obs: EpochObs, rx_m: np.ndarray, sp: SatPositions) -> ZeroD
     model = rng + trop - SPEED_OF_LIGHT_M_S * sp.clock_s
     phase = obs.phase_cyc * obs.wavelength_m - model[:, None]
     code = obs.code_m - model[:, None]
+    if antenna is not None:
+        corr = antenna.correction_m(az, el, obs.sats, obs.signal)
+        phase = phase + corr
+        code = code + corr
     return ZeroDifferences(phase, code, los, el)
 
 

@@ -12,6 +12,7 @@ from typing import Sequence
 
 import numpy as np
 
+from augnet.gnss.antex import AntennaSetup
 from augnet.gnss.ephemeris import NavigationData
 from augnet.gnss.geometry import geodetic_deg_to_ecef
 from augnet.onboard.observations import LLI_SLIP, ObsArrays
@@ -45,7 +46,32 @@ def load_obs(path: str | os.PathLike) -> ObsArrays:
             lli[k][power_fail] |= LLI_SLIP
     return ObsArrays(np.asarray(data.times, dtype=float), [str(s) for s in data.sats], data.obs, lli,
                      np.asarray(data.header.approx_position_m, dtype=float),
-                     marker_type=getattr(data.header, "marker_type", "") or "")
+                     marker_type=getattr(data.header, "marker_type", "") or "",
+                     antenna_type=data.header.antenna_type, antenna_delta_hen_m=tuple(data.header.antenna_delta_hen_m))
+
+
+def antenna_setup(obs: ObsArrays, antex, what: str) -> tuple[AntennaSetup | None, str]:
+    """The receiver's antenna from its RINEX header (type and radome, DELTA H/E/N) and an ANTEX file, and a note;
+    None when its type is not in the file and it has no antenna height either (nothing to model)."""
+    from augnet.gnss.antex import NULL_ANTENNA, split_antenna_type
+
+    h, e, n = obs.antenna_delta_hen_m
+    delta = np.array([n, e, h], float)
+    name, dome = split_antenna_type(obs.antenna_type or "")
+    ant = None
+    if name and name != NULL_ANTENNA:
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ant = antex.receiver(name, dome)
+    if ant is None:
+        note = f"{what}: antenna {name or 'unknown'} {dome}: no calibration in the ANTEX file"
+    else:
+        note = f"{what}: {name} {dome}" + (" (radome NONE's calibration)" if ant.radome_fallback else "")
+    if ant is None and not delta.any():
+        return None, note
+    return AntennaSetup(ant, delta), note + f", ARP {h:.4f} m above the marker"
 
 
 def load_nav(paths: Sequence[str | os.PathLike]) -> tuple[NavigationData, tuple | None, tuple | None]:

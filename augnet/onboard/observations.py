@@ -84,6 +84,8 @@ class ObsArrays:
     # RINEX MARKER TYPE; "NON_PHYSICAL" marks a computed station such as a network VRS, whose data
     # carry the network's residual atmosphere errors (the RTK filter weights its ionosphere for that)
     marker_type: str = ""
+    antenna_type: str = ""  # RINEX ANT # / TYPE (type and radome): the ANTEX calibration to look up
+    antenna_delta_hen_m: tuple[float, float, float] = (0.0, 0.0, 0.0)  # RINEX ANTENNA: DELTA H/E/N
 
     @property
     def non_physical(self) -> bool:

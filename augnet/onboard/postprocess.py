@@ -3,7 +3,9 @@
 Epochs are matched by time: each rover epoch is processed with the latest base epoch not after it
 (within half an interval of tolerance), so a missing base epoch ages the corrections rather than
 stopping the run; the filter itself decides when they are too old.  A base file whose MARKER TYPE is
-NON_PHYSICAL (a network VRS) is treated as one: its residual ionosphere is estimated.
+NON_PHYSICAL (a network VRS) is treated as one: its residual ionosphere is estimated.  With the receivers'
+antennas (`base_antenna`, `rover_antenna`: ANTEX calibrations and header ARP offsets, `augnet rtk --antex`),
+the base position and the solution are the markers' (RTKLIB with ant1/ant2-anttype=*).
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from typing import Iterator
 
 import numpy as np
 
+from augnet.gnss.antex import AntennaSetup
 from augnet.gnss.ephemeris import NavigationData
 from augnet.onboard.observations import ObsArrays, choose_signals, epochs
 from augnet.onboard.rtk import RtkFilter, RtkOptions, RtkSolution
@@ -22,7 +25,9 @@ EPOCH_MATCH_TOLERANCE_S = 0.05
 
 
 def process(rover: ObsArrays, base: ObsArrays, nav: NavigationData, base_position_m,
-            options: RtkOptions | None = None, base_is_vrs: bool | None = None) -> Iterator[RtkSolution]:
+            options: RtkOptions | None = None, base_is_vrs: bool | None = None,
+            base_antenna: AntennaSetup | None = None, rover_antenna: AntennaSetup | None = None
+            ) -> Iterator[RtkSolution]:
     """Solutions for every rover epoch, in time order.  `base_is_vrs`: None takes it from the base
     file's MARKER TYPE."""
     opt = options or RtkOptions()
@@ -35,7 +40,8 @@ def process(rover: ObsArrays, base: ObsArrays, nav: NavigationData, base_positio
     base_times = base_times[order]
     if base_is_vrs is None:
         base_is_vrs = getattr(base, "non_physical", False)
-    flt = RtkFilter(nav, base_position_m, opt, base_is_vrs=base_is_vrs)
+    flt = RtkFilter(nav, base_position_m, opt, base_is_vrs=base_is_vrs, base_antenna=base_antenna,
+                    rover_antenna=rover_antenna)
     for ep in rov_epochs:
         k = int(np.searchsorted(base_times, ep.time + EPOCH_MATCH_TOLERANCE_S, side="right")) - 1
         b = base_epochs[order[k]] if k >= 0 else None

@@ -45,6 +45,7 @@ from threadpoolctl import ThreadpoolController
 
 from augnet.gnss.ambiguity import AmbiguityError, FixedIntegers, FixPolicy, PartialFix, partial_fix
 from augnet.gnss.ambiguity import BIASED_FLOAT_FALSE_ALARM
+from augnet.gnss.antex import AntennaSetup
 from augnet.gnss.ephemeris import NavigationData
 from augnet.gnss.fix_confirmation import FixConfirmation, IntegerDecision
 from augnet.gnss.state_layout import StateLayout
@@ -292,8 +293,14 @@ class RtkFilter:
     """The rover's RTK engine.  Feed it epochs with `step`; it keeps its own state between them."""
 
     def __init__(self, nav: NavigationData, base_position_m, options: RtkOptions | None = None,
-                 base_is_vrs: bool = False):
+                 base_is_vrs: bool = False, base_antenna: AntennaSetup | None = None,
+                 rover_antenna: AntennaSetup | None = None):
+        """`base_antenna`/`rover_antenna`: the receivers' ANTEX calibrations and ARP offsets; with them the base
+        position and the solution refer to the markers (RTKLIB's ant1/ant2 settings); None: to the phase
+        centres as observed (a VRS has a null antenna at its point, nothing to model)."""
         self.nav = nav
+        self.base_antenna = base_antenna
+        self.rover_antenna = rover_antenna
         self.opt = options or RtkOptions()
         self.base_position_m = np.asarray(base_position_m, dtype=float)
         # a computed (non-physical) base, a network VRS: its residual atmosphere is modelled
@@ -590,7 +597,7 @@ class RtkFilter:
         valid = sp_r.valid & sp_b.valid
         # same issue of data at both ends, or the orbit error does not cancel
         valid &= sp_r.ephemeris_index == sp_b.ephemeris_index
-        zd_base = zero_differences(bo, self.base_position_m, sp_b)
+        zd_base = zero_differences(bo, self.base_position_m, sp_b, self.base_antenna)
         wl = ro.wavelength_m[:, :nf]
         same_wl = np.isclose(wl, bo.wavelength_m[:, :nf], rtol=0, atol=1e-9)
         sats = [str(s) for s in ro.sats]
@@ -632,7 +639,8 @@ class RtkFilter:
 
     def _single_differences(self, ep: _CommonEpoch, x_rov: np.ndarray) -> SingleDifferences:
         """The epoch's SDs with the rover model evaluated at x_rov."""
-        return single_differences(zero_differences(ep.rover, x_rov, ep.sp_rover), ep.zd_base, ep.nf)
+        return single_differences(zero_differences(ep.rover, x_rov, ep.sp_rover, self.rover_antenna), ep.zd_base,
+                                  ep.nf)
 
     def _phase_variance(self, el: np.ndarray) -> np.ndarray:
         return phase_variance(el, self.opt.phase_sigma_a_m, self.opt.phase_sigma_b_m)
