@@ -82,6 +82,55 @@ def test_single_base_vrs_takes_the_masters_antenna_out():
     assert (null.phase_cyc - plain.phase_cyc) * lam == pytest.approx(corr, abs=1e-7)
 
 
+def test_vrs_header_is_a_null_antenna_when_every_station_is_modelled(tmp_path):
+    from collections import Counter
+    from pathlib import Path
+
+    from augnet.centre.postprocess import Station, VrsResult, to_obsdata, write_vrs
+    from augnet.gnss.rinex import read_obs
+
+    ep = _epoch("VRS", ["G01", "G02"], np.full((2, 2), 1.0e8), np.full((2, 2), 2.2e7))
+    ep.t_gpst = 1.0e9
+    point = np.array([4789013.1, 176610.2, 4195034.9])
+    stations = [Station(n, Path(f"{n}.obs"), None, point, "test", "TRM41249.00     NONE") for n in ("A", "B")]
+
+    def result(modelled):
+        return VrsResult(point, stations, [], "A", Counter(A=1), [ep], ["single-base"], [0], 1, 0, {},
+                         antennas_modelled=modelled)
+
+    assert to_obsdata(result([])).header.antenna_type == ""
+    assert to_obsdata(result(["A"])).header.antenna_type == ""  # B's antenna is still in B-mastered epochs
+    hdr = to_obsdata(result(["A", "B"])).header
+    assert hdr.antenna_type.split() == ["ADVNULLANTENNA", "NONE"] and hdr.antenna_delta_hen_m == (0.0, 0.0, 0.0)
+    back = read_obs(write_vrs(result(["A", "B"]), tmp_path / "vrs.obs")).header
+    assert back.antenna_type[:16].strip() == "ADVNULLANTENNA" and any("null antenna" in c for c in back.comments)
+
+
+def test_live_engine_models_a_station_from_its_1033_descriptor(tmp_path):
+    from augnet.centre.engine import CentreEngine
+    from augnet.centre.ingest import StationDecoder
+    from augnet.gnss.rtcm import encode_frame
+    from augnet.gnss.rtcm.station import descriptor_message
+    from tests.gnss.test_antex import tiny_antex
+
+    frame = encode_frame(descriptor_message(7, "1234", "TEST1           SCIS", "TRIMBLE NETRS", "1.1"))
+    dec = StationDecoder("NORTH", 1.0e9)
+    dec.feed(frame)
+    assert dec.antenna_descriptor == "TEST1           SCIS" and dec.receiver_descriptor == "TRIMBLE NETRS"
+    p = tmp_path / "tiny.atx"
+    p.write_text("\n".join(tiny_antex()) + "\n")
+    xyz = {"NORTH": np.array([4.0e6, 1.0e5, 4.9e6]), "SOUTH": np.array([4.0e6, 1.5e5, 4.9e6])}
+    eng = CentreEngine(xyz, 1.0e9, antex=str(p), antenna_types={"SOUTH": "NOPE"})
+    eng.feed("NORTH", frame, 0.0)
+    assert eng.network.antennas["NORTH"].radome_fallback  # SCIS not calibrated: NONE's values
+    assert all(s.antenna["a"] is eng.network.antennas["NORTH"] for s in eng.network.solvers.values()
+               if s.name_a == "NORTH")
+    assert "SOUTH" not in eng.network.antennas and any("NOPE" in n for n in eng.antenna_notes)
+    plain = CentreEngine(xyz, 1.0e9)  # without an ANTEX file the descriptor is kept, nothing modelled
+    plain.feed("NORTH", frame, 0.0)
+    assert plain.network.antennas == {} and plain.antenna_types["NORTH"] == "TEST1           SCIS"
+
+
 # --- real data: catnet-2010-077, a station moved under a known offset antenna -------------------------------
 
 EPOCHS = 100  # 50 min of 30 s data: every baseline fixes within the first half hour (decision 0150)
@@ -173,3 +222,33 @@ def test_catnet_antennas_from_the_headers_and_a_null_antenna_vrs(catnet):
     # the VRS observations are the master's referred to its ARP: its phase-centre correction added
     assert (null.code_m[0, col] - as_master.code_m[0, col])[ok] == pytest.approx(corr[ok], abs=1e-6)
     assert np.all(np.abs(corr[ok]) > 0.005)  # TRM antennas: 5-12 cm of up offset, seen from above the mask
+
+
+CATNET_3H_EPOCHS = 360  # the first 3 h of 30 s data
+
+
+@pytest.mark.slow
+@pytest.mark.shared_data
+def test_igs05_on_catnet_changes_no_integer_and_moves_ebre_baselines_iono(catnet):
+    """The measurement of decision 0161 (run with -s to print it): IGS05 on the first 3 h changes no integer
+    decision; the DD ionosphere moves by ~1 cm RMS on the baselines joining EBRE's TRM29659.00 to the
+    TRM41249.00s (their L1-L2 offsets differ by 26 mm), by well under a millimetre between the two TRM41249.00."""
+    inp, shared = catnet
+    xyz = {s.name: s.xyz_m for s in inp.stations}
+    antennas, _ = station_antennas(inp.stations, shared / "antex" / "igs05.atx.gz")
+    plain = _run(inp, xyz, None, CATNET_3H_EPOCHS)
+    modelled = _run(inp, xyz, antennas, CATNET_3H_EPOCHS)
+    rms = {}
+    for name in ("CREU-EBRE", "CREU-GARR", "EBRE-GARR"):
+        a, b = _fixed_residuals(plain, name), _fixed_residuals(modelled, name)
+        both = sorted(set(a) & set(b))
+        changed = sum(a[k][0] != b[k][0] for k in both)
+        d_iono = np.array([b[k][1] - a[k][1] for k in both])
+        d_trop = np.array([b[k][2] - a[k][2] for k in both])
+        rms[name] = float(np.sqrt(np.mean(d_iono**2)))
+        print(f"{name}: fixed in both {len(both)}, only without {len(set(a) - set(b))}, only with "
+              f"{len(set(b) - set(a))}, integers changed {changed}; RMS change DD iono {rms[name] * 1e3:.1f} mm, "
+              f"DD non-dispersive {np.sqrt(np.mean(d_trop**2)) * 1e3:.1f} mm")
+        assert len(both) > 1000 and changed == 0
+    assert 0.005 < rms["CREU-EBRE"] < 0.03 and 0.005 < rms["EBRE-GARR"] < 0.03
+    assert rms["CREU-GARR"] < 0.001
