@@ -74,6 +74,8 @@ class FrequencyModel:
         if self.pcv_m is None or azimuth_deg is None:
             return np.interp(z, self.zenith_deg, self.noazi_m)
         a = np.mod(np.asarray(azimuth_deg, float), 360.0)
+        bad = ~(np.isfinite(a) & np.isfinite(z))  # a satellite without a position: NaN, not an index
+        a, z = np.where(bad, 0.0, a), np.where(bad, 0.0, z)
         az = self.azimuth_deg
         step = az[1] - az[0]
         fa = np.clip(a / step, 0.0, len(az) - 1.0)
@@ -86,7 +88,7 @@ class FrequencyModel:
         p = self.pcv_m
         lo = p[i0, j0] * (1 - v) + p[i0, j0 + 1] * v
         hi = p[i0 + 1, j0] * (1 - v) + p[i0 + 1, j0 + 1] * v
-        return lo * (1 - w) + hi * w
+        return np.where(bad, np.nan, lo * (1 - w) + hi * w)
 
 
 @dataclass

@@ -92,6 +92,10 @@ def test_azimuth_dependent_pcv_is_bilinear(tiny):
     assert f.pcv(22.5, 90.0) == pytest.approx(1.5e-3)
     assert f.pcv(45.0, 360.0 + 90.0) == pytest.approx(3e-3)  # azimuths wrap
     assert f.pcv(45.0) == pytest.approx(0.0)  # without an azimuth: NOAZI
+    got = f.pcv(np.array([45.0, np.nan, 45.0]), np.array([90.0, 10.0, np.nan]))  # no position: NaN
+    assert got[0] == pytest.approx(3e-3) and np.isnan(got[1:]).all()
+    corr = tiny.receiver("TEST2").correction_m([np.nan, 0.0], [np.nan, 1.0], ["G01", "G02"], [["1C"], ["1C"]])
+    assert np.isnan(corr[0, 0]) and np.isfinite(corr[1, 0])
 
 
 def test_missing_frequency_takes_gps_of_the_band_and_says_so(tiny):
