@@ -187,6 +187,8 @@ class Station:
     xyz_m: np.ndarray  # antenna reference point, ECEF
     source: str  # where the coordinates came from
     antenna_type: str = ""  # RINEX ANT # / TYPE: type (16 characters) and radome
+    antenna: ReceiverAntenna | None = None  # its ANTEX calibration (None: not modelled)
+    antenna_note: str = ""  # why it is not modelled, or modelled with radome NONE's values
 
 
 @dataclass
@@ -214,8 +216,10 @@ def _recording_non_stations(folder: Path) -> dict[str, str]:
 
 
 def load_network(folder: str | os.PathLike, nav: str | os.PathLike | None = None,
-                 coords: str | os.PathLike | None = None, exclude: tuple[str, ...] | list[str] = ()) -> NetworkInput:
-    """Find and read the reference stations' observation files and the navigation file of a folder."""
+                 coords: str | os.PathLike | None = None, exclude: tuple[str, ...] | list[str] = (),
+                 antex=None) -> NetworkInput:
+    """Find and read the reference stations' observation files and the navigation file of a folder; with
+    `antex` (an ANTEX file's path or a read `AntexFile`) each station's antenna calibration by its header's type."""
     folder = Path(folder)
     if not folder.is_dir():
         raise PostprocessError(f"--record {folder}: not a folder")
@@ -283,6 +287,7 @@ def load_network(folder: str | os.PathLike, nav: str | os.PathLike | None = None
         h, e, n = data.header.antenna_delta_hen_m
         xyz = np.asarray(marker_xyz, float) + enu_to_ecef(np.array([e, n, h], float), marker_xyz).reshape(3)
         stations.append(Station(name, p, data, xyz, source, data.header.antenna_type))
+    _station_antennas(stations, antex)
     unknown = [e for e in exclude if e.upper() not in {x.split(":")[0].upper() for x in excluded}]
     if unknown:
         raise PostprocessError(f"--exclude {' '.join(unknown)}: no such station in {folder}")
@@ -291,6 +296,22 @@ def load_network(folder: str | os.PathLike, nav: str | os.PathLike | None = None
                                f"({', '.join(s.name for s in stations) or 'none'}); a network needs at least "
                                f"{MIN_STATIONS_PER_EPOCH}")
     return NetworkInput(stations, nav_path, nav_data, excluded, recording)
+
+
+def _station_antennas(stations: list[Station], antex) -> None:
+    """Each station's calibration from the ANTEX file by its header's antenna type, and a note on one not found
+    or given radome NONE's values."""
+    if antex is None:
+        return
+    if not hasattr(antex, "receivers"):
+        try:
+            antex = read_antex(antex)
+        except AntexError as exc:
+            raise PostprocessError(f"--antex: {exc}") from None
+    found, notes = antennas_for(antex, {s.name: s.antenna_type for s in stations})
+    for s in stations:
+        s.antenna = found.get(s.name)
+        s.antenna_note = next((x for x in notes if x.startswith(f"{s.name}: ")), "")
 
 
 def align_epochs(stations: list[Station], min_stations: int = MIN_STATIONS_PER_EPOCH):
@@ -347,12 +368,16 @@ class VrsResult:
     misclosures: int = 0
     seconds_wall: float = 0.0
     notes: list[str] = field(default_factory=list)
-    antennas_modelled: list[str] = field(default_factory=list)  # stations whose antenna was corrected (ANTEX)
+
+    @property
+    def antennas_modelled(self) -> list[str]:
+        """The stations whose antenna was modelled (ANTEX)."""
+        return [s.name for s in self.stations if s.antenna is not None]
 
     @property
     def null_antenna(self) -> bool:
         """The VRS refers to a null antenna at the point: every station's antenna was modelled."""
-        return bool(self.antennas_modelled) and len(self.antennas_modelled) == len(self.stations)
+        return bool(self.stations) and all(s.antenna is not None for s in self.stations)
 
     @property
     def network_epochs(self) -> int:
@@ -395,30 +420,17 @@ def single_base_epoch(master: StationEpoch, master_xyz_m, point_ecef_m, nav: Nav
     return ep.subset(use)
 
 
-def station_antennas(stations: list[Station], antex) -> tuple[dict[str, ReceiverAntenna], list[str]]:
-    """Each station's calibration from an ANTEX file (a path or a read `AntexFile`) by its header's antenna
-    type, and notes on those not found or on radome NONE's values."""
-    if antex is None:
-        return {}, []
-    if not hasattr(antex, "receivers"):
-        try:
-            antex = read_antex(antex)
-        except AntexError as exc:
-            raise PostprocessError(f"--antex: {exc}") from None
-    return antennas_for(antex, {s.name: s.antenna_type for s in stations})
-
-
 def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress=None,
-            config: BaselineConfig | None = None, antex=None) -> VrsResult:
+            config: BaselineConfig | None = None) -> VrsResult:
     """Solve the network epoch by epoch (with the engine's settings `config`, default when None) and synthesise
-    the VRS at the point. `antex`: an ANTEX file (path or `AntexFile`) for the stations' antennas."""
+    the VRS at the point."""
     t_wall = time.perf_counter()
     point = np.asarray(point_ecef_m, float).reshape(1, 3)
     stations = {s.name: s.xyz_m for s in inp.stations}
     if master is not None and master not in stations:
         raise PostprocessError(f"--master {master}: not one of the stations ({', '.join(stations)})")
-    antennas, antenna_notes = station_antennas(inp.stations, antex)
-    net = NetworkSolver(stations, master=master, config=config, antennas=antennas)
+    net = NetworkSolver(stations, master=master, config=config,
+                        antennas={s.name: s.antenna for s in inp.stations if s.antenna is not None})
     times, rows = align_epochs(inp.stations)
     by_name = {s.name: s for s in inp.stations}
     summaries = {s.name: BaselineSummary(s.name, s.length_m / 1e3) for s in net.solvers.values()}
@@ -507,8 +519,7 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
     return VrsResult(point_ecef_m=point[0], stations=inp.stations, excluded=inp.excluded, master=net.master,
                      vrs_masters=masters, epochs=epochs, epoch_mode=modes, corrected_sats=n_corr,
                      times_processed=len(times), skipped_epochs=skipped, baselines=summaries,
-                     misclosures=misclosures, seconds_wall=time.perf_counter() - t_wall, notes=antenna_notes,
-                     antennas_modelled=sorted(antennas))
+                     misclosures=misclosures, seconds_wall=time.perf_counter() - t_wall)
 
 
 # --------------------------------------------------------------------------------------------
@@ -604,8 +615,9 @@ def summary_lines(result: VrsResult) -> list[str]:
         lines.append("antenna models (ANTEX): " + ", ".join(
             f"{s.name} {s.antenna_type.strip() or '?'}" for s in result.stations if s.name in result.antennas_modelled)
             + ("; VRS for a null antenna (ADVNULLANTENNA)" if result.null_antenna else ""))
-    for x in result.notes:
-        lines.append(f"note: {x}")
+    for s in result.stations:
+        if s.antenna_note:
+            lines.append(f"note: {s.antenna_note}")
     lines.append(f"network master {result.master}; epochs shared by >= {MIN_STATIONS_PER_EPOCH} stations: "
                  f"{result.times_processed}; VRS epochs written: {len(result.epochs)}"
                  + (f" ({result.skipped_epochs} had nothing to write)" if result.skipped_epochs else ""))
@@ -651,7 +663,7 @@ def run_vrs(record: str | os.PathLike, at: str, out: str | os.PathLike, nav=None
             progress=None, config: BaselineConfig | None = None, antex=None) -> tuple[VrsResult, list[str]]:
     """The whole post-processing: read, solve, synthesise, write. Returns the result and its summary."""
     point = parse_point(at)
-    inp = load_network(record, nav=nav, coords=coords, exclude=tuple(exclude))
-    result = process(inp, point, master=master, progress=progress, config=config, antex=antex)
+    inp = load_network(record, nav=nav, coords=coords, exclude=tuple(exclude), antex=antex)
+    result = process(inp, point, master=master, progress=progress, config=config)
     write_vrs(result, out, marker_name)
     return result, summary_lines(result)

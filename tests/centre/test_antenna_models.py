@@ -11,7 +11,7 @@ import pytest
 
 from augnet.centre.network import NetworkSolver
 from augnet.centre.observations import StationEpoch, from_obsdata
-from augnet.centre.postprocess import align_epochs, load_network, single_base_epoch, station_antennas
+from augnet.centre.postprocess import align_epochs, load_network, single_base_epoch
 from augnet.centre.satellite_geometry import SatelliteGeometry
 from augnet.centre.single_differences import above_mask
 from augnet.centre.vrs import synthesize
@@ -92,11 +92,12 @@ def test_vrs_header_is_a_null_antenna_when_every_station_is_modelled(tmp_path):
     ep = _epoch("VRS", ["G01", "G02"], np.full((2, 2), 1.0e8), np.full((2, 2), 2.2e7))
     ep.t_gpst = 1.0e9
     point = np.array([4789013.1, 176610.2, 4195034.9])
-    stations = [Station(n, Path(f"{n}.obs"), None, point, "test", "TRM41249.00     NONE") for n in ("A", "B")]
+    ant = offset_antenna()
 
     def result(modelled):
-        return VrsResult(point, stations, [], "A", Counter(A=1), [ep], ["single-base"], [0], 1, 0, {},
-                         antennas_modelled=modelled)
+        stations = [Station(n, Path(f"{n}.obs"), None, point, "test", "TRM41249.00     NONE",
+                            ant if n in modelled else None) for n in ("A", "B")]
+        return VrsResult(point, stations, [], "A", Counter(A=1), [ep], ["single-base"], [0], 1, 0, {})
 
     assert to_obsdata(result([])).header.antenna_type == ""
     assert to_obsdata(result(["A"])).header.antenna_type == ""  # B's antenna is still in B-mastered epochs
@@ -203,10 +204,12 @@ def test_an_offset_antenna_is_corrected_to_its_reference_point(catnet):
 @pytest.mark.shared_data
 def test_catnet_antennas_from_the_headers_and_a_null_antenna_vrs(catnet):
     inp, shared = catnet
-    antennas, notes = station_antennas(inp.stations, shared / "antex" / "igs05.atx.gz")
+    inp = load_network(shared / "rinex" / "catnet-2010-077", exclude=("UPC1", "UPC2"),
+                       antex=shared / "antex" / "igs05.atx.gz")
+    antennas = {s.name: s.antenna for s in inp.stations}
     assert {n: a.type_name for n, a in antennas.items()} == {"CREU": "TRM41249.00", "EBRE": "TRM29659.00",
                                                              "GARR": "TRM41249.00"}
-    assert notes == []
+    assert [s.antenna_note for s in inp.stations] == ["", "", ""]
     run = _run(inp, {s.name: s.xyz_m for s in inp.stations}, antennas, epochs=70)
     ne, eps = run[-1]
     assert set(ne.antenna_m) == {"CREU", "EBRE", "GARR"}
@@ -235,7 +238,10 @@ def test_igs05_on_catnet_changes_no_integer_and_moves_ebre_baselines_iono(catnet
     TRM41249.00s (their L1-L2 offsets differ by 26 mm), by well under a millimetre between the two TRM41249.00."""
     inp, shared = catnet
     xyz = {s.name: s.xyz_m for s in inp.stations}
-    antennas, _ = station_antennas(inp.stations, shared / "antex" / "igs05.atx.gz")
+    from augnet.gnss.antex import antennas_for, read_antex
+
+    antennas, _ = antennas_for(read_antex(shared / "antex" / "igs05.atx.gz"),
+                               {s.name: s.antenna_type for s in inp.stations})
     plain = _run(inp, xyz, None, CATNET_3H_EPOCHS)
     modelled = _run(inp, xyz, antennas, CATNET_3H_EPOCHS)
     rms = {}
