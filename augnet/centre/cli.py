@@ -27,6 +27,10 @@ def vrs(
     master: Optional[str] = typer.Option(None, "--master",
                                          help="network master station (default: the most central)"),
     name: str = typer.Option("VRS", "--name", help="marker name of the virtual station"),
+    start: Optional[str] = typer.Option(None, "--start", metavar="HH:MM[:SS]",
+                                        help="first epoch to process (GPS time of the data's first day); the "
+                                        "network starts cold there"),
+    end: Optional[str] = typer.Option(None, "--end", metavar="HH:MM[:SS]", help="last epoch to process"),
     opt: Optional[List[str]] = typer.Option(None, "--opt", metavar="NAME=VALUE",
                                             help="a network engine setting (docs/options/centre.md); repeatable"),
 ) -> None:
@@ -50,7 +54,7 @@ def vrs(
 
     try:
         result, lines = run_vrs(record, at, out, nav=nav, coords=coords, exclude=exclude or (), master=master,
-                                marker_name=name, progress=progress, config=config)
+                                marker_name=name, progress=progress, config=config, start=start, end=end)
     except PostprocessError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(2)
