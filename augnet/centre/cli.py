@@ -30,6 +30,10 @@ def vrs(
     antex: Optional[Path] = typer.Option(None, "--antex",
                                          help="ANTEX file: model the stations' antennas (RINEX header types); "
                                               "the VRS is then for a null antenna (ADVNULLANTENNA)"),
+    start: Optional[str] = typer.Option(None, "--start", metavar="HH:MM[:SS]",
+                                        help="first epoch to process (GPS time of the data's first day); the "
+                                        "network starts cold there"),
+    end: Optional[str] = typer.Option(None, "--end", metavar="HH:MM[:SS]", help="last epoch to process"),
     opt: Optional[List[str]] = typer.Option(None, "--opt", metavar="NAME=VALUE",
                                             help="a network engine setting (docs/options/centre.md); repeatable"),
 ) -> None:
@@ -53,7 +57,8 @@ def vrs(
 
     try:
         result, lines = run_vrs(record, at, out, nav=nav, coords=coords, exclude=exclude or (), master=master,
-                                marker_name=name, progress=progress, config=config, antex=antex)
+                                marker_name=name, progress=progress, config=config, antex=antex,
+                                start=start, end=end)
     except PostprocessError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(2)

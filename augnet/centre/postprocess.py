@@ -8,7 +8,8 @@ requested point (`vrs.synthesize`), then written as RINEX 3.04 that any RTK engi
 Epoch alignment. Stations may record at different intervals (1-30 s), start and stop at different times,
 or miss epochs. The epochs processed are the time tags at least `MIN_STATIONS_PER_EPOCH` stations share
 (a 1 s station beside a 30 s one gives 30 s epochs); at each one the network solves with the stations
-present and the VRS takes its nearest present station as master.
+present and the VRS takes its nearest present station as master. `--start`/`--end` (GPS time of day of the
+first epoch's day) limit the run to a span: the network starts cold at its first epoch.
 
 Satellites in the VRS. Where the network has fixed ambiguities around the point, the VRS carries the
 satellites it has corrections for (interpolated dispersive and non-dispersive DD residuals). While it has
@@ -74,6 +75,7 @@ MIN_STATIONS_PER_EPOCH = 2
 MIN_CORRECTED_SATELLITES = 10
 # Time tags of different stations are the same epoch when they agree to this [s] (RINEX writes 0.1 us).
 EPOCH_MATCH_S = 1e-3
+SECONDS_PER_DAY = 86_400.0
 # A baseline counts as fixed at an epoch when at least this share of its DD ambiguities is fixed.
 BASELINE_FIXED_SHARE = 0.5
 # |value| above which a coordinate triple is ECEF metres rather than latitude/longitude degrees (no
@@ -314,6 +316,30 @@ def _station_antennas(stations: list[Station], antex) -> None:
         s.antenna_note = next((x for x in notes if x.startswith(f"{s.name}: ")), "")
 
 
+def parse_time_of_day(text: str, what: str) -> float:
+    """`HH:MM[:SS]` -> seconds of the day (GPS time, like the RINEX epochs)."""
+    m = re.fullmatch(r"\s*(\d{1,2}):(\d{2})(?::(\d{2}(?:\.\d*)?))?\s*", text)
+    if not m:
+        raise PostprocessError(f"{what}: expected HH:MM or HH:MM:SS (GPS time of day), got {text!r}")
+    h, mi, sec = int(m.group(1)), int(m.group(2)), float(m.group(3) or 0.0)
+    if h > 24 or mi > 59 or sec >= 60.0 or h * 3600 + mi * 60 + sec > SECONDS_PER_DAY:
+        raise PostprocessError(f"{what}: {text!r} is not a time of day")
+    return h * 3600.0 + mi * 60.0 + sec
+
+
+def window_epochs(times: np.ndarray, start_s: float | None, end_s: float | None) -> np.ndarray:
+    """Which of the epochs (GPST seconds) fall in [start, end] given as seconds of the first epoch's day."""
+    keep = np.ones(len(times), bool)
+    if not len(times):
+        return keep
+    day0 = math.floor(times[0] / SECONDS_PER_DAY) * SECONDS_PER_DAY
+    if start_s is not None:
+        keep &= times >= day0 + start_s - EPOCH_MATCH_S
+    if end_s is not None:
+        keep &= times <= day0 + end_s + EPOCH_MATCH_S
+    return keep
+
+
 def align_epochs(stations: list[Station], min_stations: int = MIN_STATIONS_PER_EPOCH):
     """The epochs at least `min_stations` stations share: (times (E,), {name: (E,) row index or -1})."""
     keys = {}
@@ -421,9 +447,11 @@ def single_base_epoch(master: StationEpoch, master_xyz_m, point_ecef_m, nav: Nav
 
 
 def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress=None,
-            config: BaselineConfig | None = None) -> VrsResult:
+            config: BaselineConfig | None = None, start_s: float | None = None,
+            end_s: float | None = None) -> VrsResult:
     """Solve the network epoch by epoch (with the engine's settings `config`, default when None) and synthesise
-    the VRS at the point."""
+    the VRS at the point; only the epochs from `start_s` to `end_s` (seconds of the first epoch's day, GPS
+    time) when given: the network starts cold at the first of them."""
     t_wall = time.perf_counter()
     point = np.asarray(point_ecef_m, float).reshape(1, 3)
     stations = {s.name: s.xyz_m for s in inp.stations}
@@ -432,6 +460,10 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
     net = NetworkSolver(stations, master=master, config=config,
                         antennas={s.name: s.antenna for s in inp.stations if s.antenna is not None})
     times, rows = align_epochs(inp.stations)
+    keep = window_epochs(times, start_s, end_s)
+    if not keep.any():
+        raise PostprocessError("--start/--end: no epoch of the stations falls in that span")
+    times, rows = times[keep], {name: r[keep] for name, r in rows.items()}
     by_name = {s.name: s for s in inp.stations}
     summaries = {s.name: BaselineSummary(s.name, s.length_m / 1e3) for s in net.solvers.values()}
     epochs: list[StationEpoch] = []
@@ -660,10 +692,15 @@ def summary_lines(result: VrsResult) -> list[str]:
 
 def run_vrs(record: str | os.PathLike, at: str, out: str | os.PathLike, nav=None, coords=None,
             exclude=(), master: str | None = None, marker_name: str = VRS_MARKER_NAME,
-            progress=None, config: BaselineConfig | None = None, antex=None) -> tuple[VrsResult, list[str]]:
+            progress=None, config: BaselineConfig | None = None, antex=None, start: str | None = None,
+            end: str | None = None) -> tuple[VrsResult, list[str]]:
     """The whole post-processing: read, solve, synthesise, write. Returns the result and its summary."""
     point = parse_point(at)
+    start_s = parse_time_of_day(start, "--start") if start else None
+    end_s = parse_time_of_day(end, "--end") if end else None
+    if start_s is not None and end_s is not None and end_s <= start_s:
+        raise PostprocessError(f"--end {end} is not after --start {start}")
     inp = load_network(record, nav=nav, coords=coords, exclude=tuple(exclude), antex=antex)
-    result = process(inp, point, master=master, progress=progress, config=config)
+    result = process(inp, point, master=master, progress=progress, config=config, start_s=start_s, end_s=end_s)
     write_vrs(result, out, marker_name)
     return result, summary_lines(result)
