@@ -3,19 +3,24 @@
 Once the baselines fix, their ionosphere-free DD phase residuals (`BaselineEpoch.dd_trop_m`: the non-dispersive
 residual beyond the troposphere model, integers removed) carry what the coordinates and the model miss. Over the
 first hours of fixed data (`CHECK_WINDOW_S`) a least-squares adjustment explains them by an offset of each
-station (east, north, up) and each station's residual zenith wet delay (piecewise constant over
-`ZWD_BLOCK_S`, Niell wet mapping). DD observations see only relative positions, so one station is held; each
+station (east, north, up), each station's residual zenith wet delay (piecewise constant over `ZWD_BLOCK_S`,
+Niell wet mapping) and a constant per satellite's single-difference arc: the integers fixed on a wrong position
+absorb what they can of its error (measured: 10 cm east vanishes from the residuals without these constants),
+so the evidence is how the error changes with the geometry. DD observations see only relative positions, so one station is held; each
 station is held in turn, and a station is flagged when its offset from every other station exceeds the limits:
 with three stations and one wrong, the wrong one is off from both others, while each good one is off from one.
 With two stations a flagged pair says only that one of them is wrong.
 
 Limits (docs/decisions/0163-rtklib-second-opinion.md): on catnet as recorded (130-290 km, GPS only, broadcast
-orbits) the offsets over 3 h windows spread up to ~1.5 cm horizontally and ~4 cm vertically (the vertical
-trades off against the wet delays), so 5 cm horizontally and 10 cm vertically flag a 10 cm error and pass 1 cm.
+orbits, no antenna models) 3 h windows put the stations within 3.9 cm of each other horizontally and 13 cm
+vertically (the vertical trades off against the wet delays) in 7 of the day's 8 windows; hence 5 cm and 15 cm.
+A station 10 cm off horizontally shows 8-9 cm from both others and is flagged; 1 cm is not. The 8th window
+(06-09 h) put CREU 9-12 cm east of both others: every station is flagged there, cause not found.
 """
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -40,10 +45,14 @@ OFFSET_PRIOR_SIGMA_M = 1.0  # weak: the datum comes from the held station
 # Satellites lower than this at either station are not used [deg] (the network's fixing mask).
 MIN_ELEVATION_DEG = 15.0
 PHASE_SIGMA_M = 0.01  # ionosphere-free DD phase at zenith, for the weights only
-OUTLIER_SIGMAS = 4.0  # residuals beyond this many RMS are dropped, once
+OUTLIER_SIGMAS = 4.0  # residuals beyond this many RMS are dropped
+OUTLIER_PASSES = 3
+# A satellite's single-difference arc ends at a gap longer than this [s].
+ARC_GAP_S = 300.0
+ARC_BIAS_PRIOR_SIGMA_M = 10.0  # weak: only the arcs' common constant of a baseline is not observed
 # Flagging limits [m] of a station's offset from another (measured scatter on catnet: decision 0163).
 HORIZONTAL_LIMIT_M = 0.05
-VERTICAL_LIMIT_M = 0.10
+VERTICAL_LIMIT_M = 0.15
 
 
 @dataclass
@@ -103,7 +112,10 @@ class StationCheck:
         self.t_first: float | None = None
         self.t_last: float | None = None
         self._t_used: float | None = None
-        self._rows: list[tuple] = []  # (t, a, b, coef_a (3,), coef_b (3,), map_a, map_b, weight, y)
+        # (t, a, b, coef_a (3,), coef_b (3,), map_a, map_b, weight, y, arc of the satellite, arc of the reference)
+        self._rows: list[tuple] = []
+        self._labels: dict[str, dict[str, tuple[np.ndarray, int, float]]] = {}
+        self._arc_count = 0
 
     @property
     def complete(self) -> bool:
@@ -134,6 +146,7 @@ class StationCheck:
                 continue
             geo = {n: self._geometry(n, t - ne.clocks.get(n, 0.0), sats) for n in (a, b)}
             pos = {s: k for k, s in enumerate(sats)}
+            arc_of = self._sd_arcs(name, t, sats, res)
             for k in np.flatnonzero(use):
                 r = pos.get(ref_of[k])
                 if r is None:
@@ -146,9 +159,32 @@ class StationCheck:
                 coef_b = -(self._rot[b] @ (ub[k] - ub[r]))
                 el = min(res.elevation_a_deg[k], res.elevation_b_deg[k])
                 w = np.sin(np.radians(el)) ** 2 / PHASE_SIGMA_M ** 2
-                arc = (name, sats[k], sats[r], float(res.dd_n[k, 0]), float(res.dd_n[k, 1]))
                 self._rows.append((t, a, b, coef_a, coef_b, -(ma[k] - ma[r]), mb[k] - mb[r], w,
-                                   float(res.dd_trop_m[k]), arc))
+                                   float(res.dd_trop_m[k]), arc_of[sats[k]], arc_of[sats[r]]))
+
+    def _sd_arcs(self, name: str, t: float, sats: list[str], res) -> dict[str, int]:
+        """An arc number per fixed satellite of a baseline: its single-difference integers stay the same through
+        changes of reference (the new reference's integers against the old one carry the labels over) and end
+        at a slip, a new integer or a gap."""
+        prev = self._labels.setdefault(name, {})  # sat -> (label (2,), arc, last t)
+        slipped = set(map(str, res.slips))
+        fixed = [k for k in range(len(sats)) if res.fixed[k] and np.isfinite(res.dd_n[k]).all()]
+        shifts = Counter(tuple(prev[sats[k]][0] - res.dd_n[k]) for k in fixed
+                         if sats[k] in prev and sats[k] not in slipped and t - prev[sats[k]][2] <= ARC_GAP_S)
+        shift = np.array(shifts.most_common(1)[0][0]) if shifts else np.zeros(2)
+        out = {}
+        for k in fixed:
+            s = sats[k]
+            label = res.dd_n[k] + shift
+            old = prev.get(s)
+            if old is None or s in slipped or t - old[2] > ARC_GAP_S or not np.array_equal(old[0], label):
+                self._arc_count += 1
+                arc = self._arc_count
+            else:
+                arc = old[1]
+            prev[s] = (label, arc, t)
+            out[s] = arc
+        return out
 
     def _geometry(self, name: str, t_rx: float, sats: list[str]) -> tuple[np.ndarray, np.ndarray]:
         """(S, 3) unit vectors station -> satellite and (S,) Niell wet mapping."""
@@ -164,9 +200,9 @@ class StationCheck:
     def solve(self, held: str) -> tuple[dict[str, StationOffset], float, int]:
         """Offsets of every other station with `held` at its coordinates: ({name: offset}, RMS [m], rows used).
 
-        Each arc (baseline, satellite, reference, integers) has a free constant: the integers of a wrong
-        coordinate absorb what they can of its DD range error, so only the change of that error with the geometry
-        over an arc is evidence. The constants are eliminated by taking each arc's weighted mean out."""
+        Each single-difference arc (`_sd_arcs`) has a free constant: the integers of a wrong coordinate absorb
+        what they can of its DD range error, so only the change of that error with the geometry over an arc is
+        evidence. Rows touch at most ten parameters: the normal equations are summed from them."""
         if not self._rows:
             return {}, float("nan"), 0
         free = [n for n in self.names if n != held]
@@ -176,38 +212,37 @@ class StationCheck:
         nblk = int(block.max()) + 1
         zcol0 = 3 * len(free)
         zcol = {n: zcol0 + i * nblk for i, n in enumerate(self.names)}
-        npar = zcol0 + nblk * len(self.names)
-        arc_id = {key: i for i, key in enumerate(dict.fromkeys(r[9] for r in self._rows))}
+        acol0 = zcol0 + nblk * len(self.names)
+        arc_ids = sorted({r[9] for r in self._rows} | {r[10] for r in self._rows})
+        acol = {a: acol0 + i for i, a in enumerate(arc_ids)}
+        npar = acol0 + len(arc_ids)
         nrow = len(self._rows)
-        A = np.zeros((nrow, npar))
+        idx = np.zeros((nrow, 10), int)  # unused slots point at column 0 with a zero coefficient
+        val = np.zeros((nrow, 10))
         y = np.empty(nrow)
         w = np.empty(nrow)
-        arc = np.empty(nrow, int)
-        for i, (_, a, b, ca, cb, ma, mb, wi, yi, key) in enumerate(self._rows):
+        for i, (_, a, b, ca, cb, ma, mb, wi, yi, arc_k, arc_r) in enumerate(self._rows):
             if a in col:
-                A[i, col[a]:col[a] + 3] = ca
+                idx[i, 0:3], val[i, 0:3] = range(col[a], col[a] + 3), ca
             if b in col:
-                A[i, col[b]:col[b] + 3] = cb
-            A[i, zcol[a] + block[i]] = ma
-            A[i, zcol[b] + block[i]] = mb
-            y[i], w[i], arc[i] = yi, wi, arc_id[key]
-        prior = np.r_[np.full(zcol0, OFFSET_PRIOR_SIGMA_M ** -2), np.full(npar - zcol0, ZWD_PRIOR_SIGMA_M ** -2)]
+                idx[i, 3:6], val[i, 3:6] = range(col[b], col[b] + 3), cb
+            idx[i, 6:10] = (zcol[a] + block[i], zcol[b] + block[i], acol[arc_k], acol[arc_r])
+            val[i, 6:10] = (ma, mb, 1.0, -1.0)
+            y[i], w[i] = yi, wi
+        prior = np.r_[np.full(zcol0, OFFSET_PRIOR_SIGMA_M ** -2), np.full(acol0 - zcol0, ZWD_PRIOR_SIGMA_M ** -2),
+                      np.full(npar - acol0, ARC_BIAS_PRIOR_SIGMA_M ** -2)]
         keep = np.ones(nrow, bool)
-        for _ in range(2):
+        for _ in range(OUTLIER_PASSES):
             wk = np.where(keep, w, 0.0)
-            Ay = np.column_stack([A, y])
-            sums = np.zeros((len(arc_id), npar + 1))
-            np.add.at(sums, arc, Ay * wk[:, None])
-            wsum = np.bincount(arc, weights=wk, minlength=len(arc_id))
-            means = sums / np.where(wsum > 0, wsum, 1.0)[:, None]
-            Ac, yc = A - means[arc, :npar], y - means[arc, npar]
-            Aw = Ac * wk[:, None]
-            N = Ac.T @ Aw + np.diag(prior)
-            x = np.linalg.solve(N, Aw.T @ yc)
-            v = yc - Ac @ x
+            N = np.diag(prior)
+            np.add.at(N, (idx[:, :, None], idx[:, None, :]), wk[:, None, None] * val[:, :, None] * val[:, None, :])
+            rhs = np.zeros(npar)
+            np.add.at(rhs, idx, (wk * y)[:, None] * val)
+            x = np.linalg.solve(N, rhs)
+            v = y - (val * x[idx]).sum(axis=1)
             rms = float(np.sqrt(np.mean(v[keep] ** 2)))
             keep = np.abs(v) <= OUTLIER_SIGMAS * rms
-        cov = np.linalg.inv(N)
+        cov = np.linalg.inv(N)[:zcol0, :zcol0]
         out = {n: StationOffset(n, held, x[col[n]:col[n] + 3].copy(), np.sqrt(np.diag(cov)[col[n]:col[n] + 3]))
                for n in free}
         return out, rms, int(keep.sum())
@@ -230,3 +265,4 @@ class StationCheck:
             if against and all(o.exceeds() for o in against):
                 res.flagged.append(n)
         return res
+
