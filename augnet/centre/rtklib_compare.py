@@ -226,6 +226,10 @@ class Comparison:
     examples: list[str] = field(default_factory=list)
 
 
+def _pairs(n: int) -> int:
+    return n * (n - 1) // 2
+
+
 def compare(ours: OurIntegers, rtk_fixed: dict[float, dict[int, dict[str, int]]],
             rtk_arcs: dict[float, dict[tuple[str, int], int]], max_examples: int = 10) -> Comparison:
     """Reference-free comparison of the two programs' DD integers on one baseline (the rule in the docstring)."""
@@ -240,9 +244,8 @@ def compare(ours: OurIntegers, rtk_fixed: dict[float, dict[int, dict[str, int]]]
             a = sorted(mine)
             both = [s for s in a if s in theirs]
             n_mine, n_theirs, n_both = len(a), len(theirs), len(both)
-            pairs = lambda n: n * (n - 1) // 2  # noqa: E731
-            cmp.ours_only += pairs(n_mine) - pairs(n_both)
-            cmp.rtklib_only += pairs(n_theirs) - pairs(n_both)
+            cmp.ours_only += _pairs(n_mine) - _pairs(n_both)
+            cmp.rtklib_only += _pairs(n_theirs) - _pairs(n_both)
             for x in range(n_both):
                 for y in range(x + 1, n_both):
                     i, j = both[x], both[y]

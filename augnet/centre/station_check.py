@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from augnet.centre.satellite_geometry import MIN_MODEL_ELEVATION_RAD
 from augnet.gnss import troposphere
 from augnet.gnss.ephemeris import NavigationData, transit
 from augnet.gnss.geometry import ecef_to_geodetic, enu_rotation
@@ -169,13 +170,16 @@ class StationCheck:
         prev = self._labels.setdefault(name, {})  # sat -> (label (2,), arc, last t)
         slipped = set(map(str, res.slips))
         fixed = [k for k in range(len(sats)) if res.fixed[k] and np.isfinite(res.dd_n[k]).all()]
-        shifts = Counter(tuple(prev[sats[k]][0] - res.dd_n[k]) for k in fixed
-                         if sats[k] in prev and sats[k] not in slipped and t - prev[sats[k]][2] <= ARC_GAP_S)
-        shift = np.array(shifts.most_common(1)[0][0]) if shifts else np.zeros(2)
+        shift = {}  # per system (each has its reference): what most continuing satellites' labels moved by
+        for system in {s[0] for s in sats}:
+            moved = Counter(tuple(prev[sats[k]][0] - res.dd_n[k]) for k in fixed
+                            if sats[k][0] == system and sats[k] in prev and sats[k] not in slipped
+                            and t - prev[sats[k]][2] <= ARC_GAP_S)
+            shift[system] = np.array(moved.most_common(1)[0][0]) if moved else np.zeros(2)
         out = {}
         for k in fixed:
             s = sats[k]
-            label = res.dd_n[k] + shift
+            label = res.dd_n[k] + shift[s[0]]
             old = prev.get(s)
             if old is None or s in slipped or t - old[2] > ARC_GAP_S or not np.array_equal(old[0], label):
                 self._arc_count += 1
@@ -194,7 +198,7 @@ class StationCheck:
         el = np.arcsin(np.clip(u @ up, -1.0, 1.0))
         lat, _, h = self._llh[name]
         doy = to_datetime(t_rx).timetuple().tm_yday
-        _, mw = troposphere.niell(np.clip(el, np.radians(3.0), None), lat, h, doy)
+        _, mw = troposphere.niell(np.clip(el, MIN_MODEL_ELEVATION_RAD, None), lat, h, doy)
         return u, mw
 
     def solve(self, held: str) -> tuple[dict[str, StationOffset], float, int]:
