@@ -15,7 +15,8 @@ Limits (docs/decisions/0163-rtklib-second-opinion.md): on catnet as recorded (13
 orbits, no antenna models) 3 h windows put the stations within 3.9 cm of each other horizontally and 13 cm
 vertically (the vertical trades off against the wet delays) in 7 of the day's 8 windows; hence 5 cm and 15 cm.
 A station 10 cm off horizontally shows 8-9 cm from both others and is flagged; 1 cm is not. The 8th window
-(06-09 h) put CREU 9-12 cm east of both others: every station is flagged there, cause not found.
+(06-09 h) put CREU 9-12 cm east of both others: every station is flagged there, cause not found. Spans shorter
+than the window get no verdict (1-2 h scatter by 10-30 cm).
 """
 
 from __future__ import annotations
@@ -78,13 +79,14 @@ class CheckResult:
     span_s: float
     offsets: list[StationOffset] = field(default_factory=list)  # every station against every held one
     flagged: list[str] = field(default_factory=list)
+    window_s: float = CHECK_WINDOW_S
     rms_m: float = float("nan")
-    verdict: bool = False  # False: too little fixed data to judge
+    verdict: bool = False  # False: too little fixed data, or too short a span, to judge
 
     def lines(self) -> list[str]:
         if not self.verdict:
-            return [f"station coordinates: not checked ({self.rows} fixed DD residuals, at least {MIN_ROWS} "
-                    "needed)"]
+            return [f"station coordinates: not checked ({self.rows} fixed DD residuals over {self.span_s / 3600:.1f} h; "
+                    f"the check needs {MIN_ROWS} over {self.window_s / 3600:.0f} h)"]
         out = [f"station coordinates checked against {self.rows} fixed DD residuals over {self.span_s / 3600:.1f} h "
                f"(RMS {self.rms_m * 1e3:.1f} mm); limits {HORIZONTAL_LIMIT_M * 100:.0f} cm horizontal, "
                f"{VERTICAL_LIMIT_M * 100:.0f} cm vertical"]
@@ -254,8 +256,9 @@ class StationCheck:
     def result(self) -> CheckResult:
         """Every station against every other held, and the stations flagged."""
         span = (self.t_last - self.t_first) if self.t_first is not None and self.t_last is not None else 0.0
-        res = CheckResult(rows=len(self._rows), span_s=span)
-        if len(self._rows) < MIN_ROWS or len(self.names) < 2:
+        res = CheckResult(rows=len(self._rows), span_s=span, window_s=self.window_s)
+        # shorter spans are not judged: 1-2 h solutions on catnet scatter by 10-30 cm (decision 0163)
+        if len(self._rows) < MIN_ROWS or len(self.names) < 2 or not self.complete:
             return res
         res.verdict = True
         rms = []
