@@ -38,6 +38,8 @@ so it applies its own antenna model only (use-snip.com knowledge base "What is A
 6566 of 2012-08-29 on the same option at reference stations). A station whose antenna is not in the file is
 left uncorrected; then the header keeps an empty antenna type and a comment says so. Without an ANTEX file
 nothing is modelled and the VRS carries its master's antenna (empty antenna type), as before.
+Once the baselines fix, the coordinates are checked against the data of the first hours (`station_check.py`):
+a station whose position disagrees by more than the check's limits stops the run with its offsets.
 """
 
 from __future__ import annotations
@@ -57,6 +59,7 @@ import numpy as np
 from augnet.centre.baseline_config import BaselineConfig
 from augnet.centre.network import NetworkSolver
 from augnet.centre.observations import StationEpoch, from_obsdata
+from augnet.centre.station_check import CheckResult, StationCheck
 from augnet.centre.vrs import geometry_many, synthesize
 from augnet.gnss.antex import NULL_ANTENNA, AntexError, ReceiverAntenna, antennas_for, read_antex
 from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
@@ -78,6 +81,10 @@ EPOCH_MATCH_S = 1e-3
 SECONDS_PER_DAY = 86_400.0
 # A baseline counts as fixed at an epoch when at least this share of its DD ambiguities is fixed.
 BASELINE_FIXED_SHARE = 0.5
+# The summary's fixed share of DD ambiguities counts satellites this high at both stations [deg], from this long
+# after the baseline's first epoch [s] (issue 14: >= 80 % on catnet's 130 and 163 km baselines after the first hour).
+SUMMARY_MIN_ELEVATION_DEG = 15.0
+SUMMARY_AFTER_S = 3600.0
 # |value| above which a coordinate triple is ECEF metres rather than latitude/longitude degrees (no
 # latitude or longitude exceeds 360 degrees; no point on Earth is within 6000 km of its centre).
 ECEF_MIN_COMPONENT_M = 1.0e4
@@ -367,6 +374,13 @@ class BaselineSummary:
     last_fixed_share: float = 0.0
     last_fixed_by_system: dict = field(default_factory=dict)  # system -> (fixed, DD ambiguities) at the end
 
+    late_fixed: int = 0  # DD ambiguities fixed above SUMMARY_MIN_ELEVATION_DEG after SUMMARY_AFTER_S
+    late_count: int = 0  # DD ambiguities there
+
+    @property
+    def late_fixed_share(self) -> float | None:
+        return self.late_fixed / self.late_count if self.late_count else None
+
     @property
     def mean_fixed_fraction(self) -> float:
         return self.fixed_share_sum / self.epochs if self.epochs else 0.0
@@ -393,6 +407,7 @@ class VrsResult:
     baselines: dict[str, BaselineSummary]
     misclosures: int = 0
     seconds_wall: float = 0.0
+    station_check: CheckResult | None = None
     notes: list[str] = field(default_factory=list)
 
     @property
@@ -474,6 +489,8 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
     prev_corrected: set[str] = set()
     skipped = 0
     misclosures = 0
+    check = StationCheck(stations, {s.name: (s.name_a, s.name_b) for s in net.solvers.values()}, inp.nav)
+    checked: CheckResult | None = None
     for e, t in enumerate(times):
         eps = {}
         for name, r in rows.items():
@@ -481,6 +498,10 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
                 eps[name] = from_obsdata(by_name[name].obs, int(r[e]), name)
         ne = net.update(eps, inp.nav)
         misclosures += ne.misclosures
+        if checked is None:
+            check.add(ne)
+            if check.complete:
+                checked = _judge_stations(check)
         for solver in net.solvers.values():
             res = ne.baselines[solver.name]
             bs = summaries[solver.name]
@@ -496,6 +517,10 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
                                        for sys_ in sorted(set(systems.tolist()))}
             if bs.first_epoch_t is None:
                 bs.first_epoch_t = float(t)
+            if t - bs.first_epoch_t >= SUMMARY_AFTER_S:
+                high = nonref & (np.minimum(res.elevation_a_deg, res.elevation_b_deg) >= SUMMARY_MIN_ELEVATION_DEG)
+                bs.late_fixed += int((res.fixed & high).sum())
+                bs.late_count += int(high.sum())
             if bs.first_fix_t is None and res.fixed_fraction >= BASELINE_FIXED_SHARE:
                 bs.first_fix_t = float(t)
         clocks = dict(getattr(ne, "clocks", None) or _station_clocks(net))
@@ -551,7 +576,19 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
     return VrsResult(point_ecef_m=point[0], stations=inp.stations, excluded=inp.excluded, master=net.master,
                      vrs_masters=masters, epochs=epochs, epoch_mode=modes, corrected_sats=n_corr,
                      times_processed=len(times), skipped_epochs=skipped, baselines=summaries,
-                     misclosures=misclosures, seconds_wall=time.perf_counter() - t_wall)
+                     misclosures=misclosures, seconds_wall=time.perf_counter() - t_wall,
+                     station_check=checked if checked is not None else _judge_stations(check))
+
+
+def _judge_stations(check: StationCheck) -> CheckResult:
+    """The station-coordinate check's verdict; a flagged station stops the run: a network fixed on a wrong
+    position gives every rover that error."""
+    res = check.result()
+    if res.flagged:
+        raise PostprocessError("station coordinates disagree with the data: " + "; ".join(res.lines()[1:])
+                               + f" -- survey {', '.join(res.flagged)} again and give --coords, or leave it out "
+                               "with --exclude")
+    return res
 
 
 # --------------------------------------------------------------------------------------------
@@ -664,10 +701,14 @@ def summary_lines(result: VrsResult) -> list[str]:
         fix_txt = (f"first fix after {ttf:.0f} s" if ttf is not None
                    else f"never reached {BASELINE_FIXED_SHARE:.0%} of its ambiguities fixed")
         per_sys = ", ".join(f"{k} {v[0]}/{v[1]}" for k, v in b.last_fixed_by_system.items())
+        late = (f", {b.late_fixed_share:.0%} of DD ambiguities above {SUMMARY_MIN_ELEVATION_DEG:.0f} deg fixed "
+                f"after the first {SUMMARY_AFTER_S / 3600:.0f} h" if b.late_fixed_share is not None else "")
         lines.append(f"baseline {b.name} ({b.length_km:.1f} km): {b.epochs} epochs, mean fixed fraction "
-                     f"{b.mean_fixed_fraction:.0%}, last {b.last_fixed_share:.0%} ({per_sys}), {fix_txt}")
+                     f"{b.mean_fixed_fraction:.0%}, last {b.last_fixed_share:.0%} ({per_sys}), {fix_txt}{late}")
     if result.misclosures:
         lines.append(f"triangle misclosures (satellites voided for an epoch): {result.misclosures}")
+    if result.station_check is not None:
+        lines.extend(result.station_check.lines())
     n = len(result.epochs)
     net_n = result.network_epochs
     if n:
