@@ -581,10 +581,12 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
 
 
 def _judge_stations(check: StationCheck) -> CheckResult:
-    """The station-coordinate check's verdict; a flagged station stops the run: a network fixed on a wrong
-    position gives every rover that error."""
+    """The station-coordinate check's verdict; a station the others single out stops the run: a network fixed on
+    a wrong position gives every rover that error. When half the stations or more are flagged the check names no
+    culprit (measured on catnet 06-09 h: all three flagged, RTKLIB static puts each within 2.4 cm of its header,
+    decision 0163), so the run goes on and the summary says the coordinates are unconfirmed."""
     res = check.result()
-    if res.flagged:
+    if res.flagged and 2 * len(res.flagged) < len(check.names):
         raise PostprocessError("station coordinates disagree with the data: " + "; ".join(res.lines()[1:])
                                + f" -- survey {', '.join(res.flagged)} again and give --coords, or leave it out "
                                "with --exclude")

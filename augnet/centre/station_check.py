@@ -96,6 +96,9 @@ class CheckResult:
                      for o in self.offsets if o.name == n]
             state = "FLAGGED" if n in self.flagged else "ok"
             out.append(f"station {n} {state}: " + "; ".join(parts))
+        if self.flagged and 2 * len(self.flagged) >= len(names):
+            out.append(f"station coordinates unconfirmed: {len(self.flagged)} of {len(names)} stations flagged, so the "
+                       "check singles out none (not refused)")
         return out
 
 
