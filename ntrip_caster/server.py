@@ -108,6 +108,7 @@ class ClientSession:
             return
         t.write(payload)
         self.bytes_out += len(payload)
+        self.mount.bytes_out += len(payload)  # a VRS mountpoint's streams are written here, not by publish
 
     def stats(self) -> dict[str, Any]:
         fix = self.last_fix
