@@ -164,7 +164,7 @@ class System:
         from augnet.system.rbc_link import RbcConnection, SectionPlan
 
         plan = SectionPlan(self.world.track.length_m / 1000.0, self.station_km)
-        self.rbc = RbcConnection(plan, {rx.id: rx.rtcm_id for rx in stations})
+        self.rbc = RbcConnection(plan, {rx.id: rx.rtcm_id for rx in stations}, on_alarm=self._alarm)
         await self.rbc.start(self.settings.host)
 
     async def _start_console(self, stations) -> None:
