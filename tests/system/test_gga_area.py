@@ -47,3 +47,24 @@ def test_loop_side_refuses_raises_one_alarm_and_clears_it():
         assert event is not None and event[4] is True
     finally:
         loop.close()
+
+
+def test_settings_configure_the_area():
+    from augnet.system.settings import SettingsError, SystemSettings
+
+    area = SystemSettings(service_radius_km=30.0, outside_area="nearest").validate().area()
+    assert area.max_distance_m == 30_000.0 and area.outside == "nearest"
+    assert SystemSettings().area().max_distance_m is None
+    for bad in ({"service_radius_km": 0.0}, {"outside_area": "ignore"}):
+        with pytest.raises(SettingsError):
+            SystemSettings(**bad).validate()
+    spec = CentreSpec({k: tuple(v) for k, v in STATIONS.items()}, 0.0, "catnet", area=area)
+    loop = asyncio.new_event_loop()
+    try:
+        got = bytearray()
+        svc = CentreService(spec, loop)
+        svc.open("VRS/1", "VRS", fix(41.0, 2.7, 0.0), got.extend)  # ~70 km from GARR: served at GARR, told so
+        (_, msg), = list(RTCMReader(io.BytesIO(bytes(got))))
+        assert "serving station GARR" in msg.DF140
+    finally:
+        loop.close()
