@@ -1,4 +1,5 @@
-"""The one exception the NTRIP wire cores raise: it carries the HTTP status to answer with (h11 style)."""
+"""The one exception the NTRIP wire cores raise (it carries the HTTP status to answer with, h11 style), and
+the one a stream factory raises to refuse a client (the caster and augnet's centre both import it)."""
 
 from __future__ import annotations
 
@@ -10,3 +11,13 @@ class NtripProtocolError(Exception):
         super().__init__(f"{status}: {reason}")
         self.status = status
         self.reason = reason
+
+
+class StreamRefused(Exception):
+    """A VRS stream factory will not serve this client: `reason` for the log, `data` for the client (stream
+    bytes, e.g. an RTCM 1029 text message saying why)."""
+
+    def __init__(self, reason: str, data: bytes = b"") -> None:
+        super().__init__(reason)
+        self.reason = reason
+        self.data = data

@@ -36,7 +36,7 @@ from .reposition import RepositionPolicy, choose_base
 from .request import NtripRequest
 from .response import error_response, json_response, source_ok, sourcetable_response, stream_ok
 from .sourcetable import CasRecord, StrRecord, filter_records, render_sourcetable
-from .stream_factory import StreamFactory, StreamHandle, load_factory
+from .stream_factory import StreamFactory, StreamHandle, StreamRefused, load_factory
 
 log = logging.getLogger("ntrip_caster")
 
@@ -108,6 +108,7 @@ class ClientSession:
             return
         t.write(payload)
         self.bytes_out += len(payload)
+        self.mount.bytes_out += len(payload)  # a VRS mountpoint's streams are written here, not by publish
 
     def stats(self) -> dict[str, Any]:
         fix = self.last_fix
@@ -667,6 +668,9 @@ class Caster:
                     s.handle = mount.factory.open(f"{mount.name}/{s.id}", mount.name, fix, s.send)
                 else:
                     s.handle.update_position(fix)
+            except StreamRefused as refused:  # the factory's answer (outside its service area, say)
+                log.info("client %d on %s refused: %s", s.id, mount.name, refused.reason)
+                self.refuse_client(s, refused.data)
             except Exception:  # a factory bug must not take the caster down
                 log.exception("stream factory failed for client %d on %s", s.id, mount.name)
                 mount.drops["factory_error"] += 1
@@ -691,6 +695,19 @@ class Caster:
         self.remove_client(s)
         s.proto.closed = True
         s.transport.abort()  # its backlog is useless; free it now
+
+    def refuse_client(self, s: ClientSession, data: bytes) -> None:
+        """End a client's stream cleanly after `data` (the factory's reason, as stream bytes)."""
+        if s.closed:
+            return
+        s.handle = None  # the factory has already let it go
+        s.send(data)
+        if s.version == 2 and not s.closed:
+            s.transport.write(LAST_CHUNK)
+        s.mount.drops["refused"] += 1
+        self.counters["drop_refused"] += 1
+        self.remove_client(s)
+        s.proto.close()
 
     def remove_client(self, s: ClientSession) -> None:
         if s.closed:

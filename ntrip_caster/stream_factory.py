@@ -11,6 +11,10 @@ Life of one VRS client:
      `handle.update_position(fix)`
   4. the client leaves or is dropped -> `handle.close()`
 
+`open` and `update_position` may raise `StreamRefused` (a position outside the service area, say): the
+caster writes its `data` (a message the client can read, e.g. an RTCM 1029 text), closes the connection
+and counts it as `refused` on the mountpoint (a refused handle is not closed: the factory let it go). Any other exception is a factory bug (`factory_error`).
+
 `sink(data)` queues whole RTCM 3 frames (ideally one epoch per call) for that client. It must be
 called on the caster's event loop thread; a factory working in another thread uses
 `loop.call_soon_threadsafe(sink, data)`. After `close()` the sink ignores anything it is given.
@@ -20,6 +24,8 @@ from __future__ import annotations
 
 import importlib
 from typing import Callable, Protocol, runtime_checkable
+
+from augwire.errors import StreamRefused
 
 from .gga import GgaFix
 
@@ -49,3 +55,6 @@ def load_factory(spec: str) -> StreamFactory:
     if not isinstance(obj, StreamFactory):
         raise ValueError(f"factory {spec!r} has no open(client_id, mount, fix, sink) method")
     return obj
+
+
+__all__ = ["Sink", "StreamFactory", "StreamHandle", "StreamRefused", "load_factory"]

@@ -26,11 +26,12 @@ import numpy as np
 from augnet.centre.baseline_config import BaselineConfig
 from augnet.centre.ingest import EpochAligner, StationDecoder
 from augnet.centre.network import NetworkEpoch, NetworkSolver
+from augnet.centre.service_area import AreaAlarm, AreaAnswer, AreaConfig, ServiceArea, refusal_message
 from augnet.centre.vrs import VrsEpoch, VrsPlan, synthesize
 from augnet.centre.vrs_stream import VrsStreamEncoder
 from augnet.gnss.antex import AntexFile, read_antex
 from augnet.gnss.ephemeris import Ephemeris, NavigationData
-from augnet.gnss.geometry import geodetic_deg_to_ecef
+from augwire.errors import StreamRefused
 
 log = logging.getLogger(__name__)
 
@@ -51,6 +52,7 @@ class Session:
     opened_t: float | None = None
     bytes_sent: int = 0
     epochs_sent: int = 0
+    area_reason: str = ""  # why it is served elsewhere than its position (outside the service area)
 
 
 @dataclass
@@ -82,12 +84,15 @@ class CentreEngine:
                  master: str | None = None, config: BaselineConfig | None = None,
                  ephemerides: list[Ephemeris] | None = None, msm_level: int = 7,
                  vrs_before_network: bool = True, antex: AntexFile | str | None = None,
-                 antenna_types: dict[str, str] | None = None):
+                 antenna_types: dict[str, str] | None = None, area: AreaConfig | None = None):
         self.network_name = network_name
         self.antex = read_antex(antex) if isinstance(antex, (str, bytes)) or hasattr(antex, "__fspath__") else antex
         self.antenna_types: dict[str, str] = {}  # station -> antenna type in use (1033 or configured)
         self.antenna_notes: list[str] = []
         self.stations = {k: np.asarray(v, float) for k, v in stations.items()}
+        self.area = ServiceArea(self.stations, area)  # where sessions may open (service_area.py)
+        self.area_alarm = AreaAlarm(network_name)
+        self._now = 0.0  # the latest `now` fed or ticked (the area alarm's clock)
         self.decoders = {name: StationDecoder(name, t_ref_gpst) for name in stations}
         self.aligner = EpochAligner(list(stations))
         self.network = NetworkSolver(self.stations, master=master, config=config)
@@ -127,6 +132,7 @@ class CentreEngine:
     # --- inputs ---------------------------------------------------------------------------------
 
     def feed(self, station: str, data: bytes, now: float) -> None:
+        self._now = max(self._now, now)
         dec = self.decoders.get(station)
         if dec is None:
             return
@@ -168,25 +174,50 @@ class CentreEngine:
     # --- sessions (one per VRS client) ----------------------------------------------------------
 
     def open_session(self, client_id: str, lat_deg: float, lon_deg: float, h_m: float,
-                     sink: Callable[[bytes], None]) -> Session:
+                     sink: Callable[[bytes], None]) -> Session | AreaAnswer:
+        """A VRS session at the position; one that is no place on Earth or outside the service area opens
+        none: its refusal (`AreaAnswer.reason`) is returned and an alarm queued (`service_area.py`)."""
+        answer = self._check_area(client_id, lat_deg, lon_deg, h_m)
+        if answer.refused:
+            return answer
         sid = next(self._station_ids)
         if sid > MAX_STATION_ID:
             self._station_ids = itertools.count(FIRST_VRS_STATION_ID)
             sid = next(self._station_ids)
-        point = geodetic_deg_to_ecef(lat_deg, lon_deg, h_m)
-        s = Session(client_id, sink, point, sid)
+        point = answer.point_ecef
+        s = Session(client_id, sink, point, sid, area_reason=answer.reason)
         self.sessions[client_id] = s
         self.encoder.add(client_id, sid, point)
         self._unplanned[client_id] = None
         return s
 
-    def move_session(self, client_id: str, lat_deg: float, lon_deg: float, h_m: float) -> None:
+    def move_session(self, client_id: str, lat_deg: float, lon_deg: float, h_m: float) -> AreaAnswer | None:
+        """Move a session's virtual station; a position it may not be served at closes it (returned)."""
         s = self.sessions.get(client_id)
         if s is None:
-            return
-        s.point_ecef = geodetic_deg_to_ecef(lat_deg, lon_deg, h_m)
+            return None
+        answer = self._check_area(client_id, lat_deg, lon_deg, h_m)
+        if answer.refused:
+            self.close_session(client_id)
+            return answer
+        s.point_ecef, s.area_reason = answer.point_ecef, answer.reason
         self.encoder.move(client_id, s.point_ecef)
         self._unplanned[client_id] = None
+        return None
+
+    def _check_area(self, client_id: str, lat_deg: float, lon_deg: float, h_m: float) -> AreaAnswer:
+        answer = self.area.check(lat_deg, lon_deg, h_m)
+        if answer.kind != "inside":
+            log.info("VRS session %s: %s", client_id, answer.reason)
+            self._queue_alarm(self.area_alarm.refused(self._now, client_id, answer))
+        return answer
+
+    def _queue_alarm(self, event: tuple | None) -> None:
+        if event is not None:
+            kind, subject, severity, message, cleared = event
+            self.outbox.append((SUBJECT_ALARMS.format(network=self.network_name), json.dumps({
+                "kind": kind, "subject": subject, "severity": severity, "message": message,
+                "t_gpst": None, "cleared": cleared}).encode()))
 
     def close_session(self, client_id: str) -> None:
         self.sessions.pop(client_id, None)
@@ -195,6 +226,8 @@ class CentreEngine:
     # --- processing -----------------------------------------------------------------------------
 
     def tick(self, now: float) -> list[EpochReport]:
+        self._now = max(self._now, now)
+        self._queue_alarm(self.area_alarm.poll(now))
         reports = []
         for t, got in self.aligner.ready(now):
             if len(self.nav) == 0:
@@ -328,7 +361,9 @@ class _Handle:
         self.client_id = client_id
 
     def update_position(self, fix) -> None:
-        self.engine.move_session(self.client_id, fix.lat_deg, fix.lon_deg, fix.height_m)
+        refused = self.engine.move_session(self.client_id, fix.lat_deg, fix.lon_deg, fix.height_m)
+        if refused is not None:
+            raise StreamRefused(refused.reason, refusal_message(refused.reason))
 
     def close(self) -> None:
         self.engine.close_session(self.client_id)
@@ -341,5 +376,9 @@ class CentreStreamFactory:
         self.engine = engine
 
     def open(self, client_id: str, mount: str, fix, sink) -> _Handle:
-        self.engine.open_session(client_id, fix.lat_deg, fix.lon_deg, fix.height_m, sink)
+        opened = self.engine.open_session(client_id, fix.lat_deg, fix.lon_deg, fix.height_m, sink)
+        if isinstance(opened, AreaAnswer):
+            raise StreamRefused(opened.reason, refusal_message(opened.reason))
+        if opened.area_reason:  # served at the nearest station: the client is told so
+            sink(refusal_message(opened.area_reason))
         return _Handle(self.engine, client_id)

@@ -45,10 +45,12 @@ from typing import Callable
 import numpy as np
 
 from augnet.blas_threads import limit_blas_threads
+from augnet.centre.service_area import AreaAlarm, AreaConfig, ServiceArea, refusal_message
 from augnet.gnss import time as gtime
 from augnet.system.centre_protocol import (
     FROM_CENTRE, FROM_LOOP, Alive, CentreError, CloseSession, Decoder, EpochsSolved, Message, MoveSession,
     OpenSession, ProtocolError, Ready, StationData, Stop, VrsGroup, VrsWritten, encode)
+from augwire.errors import StreamRefused
 
 log = logging.getLogger(__name__)
 
@@ -98,6 +100,7 @@ class CentreSpec:
     stations: dict[str, tuple[float, float, float]]  # name -> ECEF [m]
     t_ref_gpst: float
     network_name: str = "line"
+    area: AreaConfig | None = None  # the service area (default: from the stations, service_area.py)
 
 
 class _Handle:
@@ -162,6 +165,10 @@ class CentreService:
         self.protocol_errors = 0  # unreadable frames from the centre (each also ends that centre process)
         self.restarts = 0
         self.excluded_stations: set[str] = set()
+        # positions are checked here, on the loop, so that a refusal reaches the client and the alarm store
+        # (the centre's engine checks them again)
+        self.area = ServiceArea({k: np.asarray(v, float) for k, v in spec.stations.items()}, spec.area)
+        self.area_alarm = AreaAlarm(spec.network_name)
         self.last = None  # the latest EpochReport
         self.pid: int | None = None
         self._sinks: dict[str, Callable[[bytes], None]] = {}  # loop-side sinks of live sessions
@@ -204,6 +211,7 @@ class CentreService:
             self._send(StationData(station, data, time.time()))
 
     def open(self, client_id: str, mount: str, fix, sink) -> _Handle:
+        self._check_area(client_id, fix.lat_deg, fix.lon_deg, fix.height_m, sink)
         self._sinks[client_id] = sink
         self._positions[client_id] = (fix.lat_deg, fix.lon_deg, fix.height_m)
         self._send(OpenSession(client_id, fix.lat_deg, fix.lon_deg, fix.height_m))
@@ -211,8 +219,28 @@ class CentreService:
 
     def _move(self, client_id: str, lat: float, lon: float, h: float) -> None:
         if client_id in self._sinks:
+            try:
+                self._check_area(client_id, lat, lon, h, None)
+            except StreamRefused:
+                self._close(client_id)
+                raise
             self._positions[client_id] = (lat, lon, h)
             self._send(MoveSession(client_id, lat, lon, h))
+
+    def _check_area(self, client_id: str, lat: float, lon: float, h: float, sink) -> None:
+        """Raise `StreamRefused` (the caster tells the client why) for a position the service area refuses;
+        a client served at the nearest station instead is told so through `sink`. Either raises the alarm."""
+        answer = self.area.check(lat, lon, h)
+        if answer.kind == "inside":
+            return
+        log.info("VRS session %s: %s", client_id, answer.reason)
+        event = self.area_alarm.refused(self.loop.time(), client_id, answer)
+        if event is not None and self.on_alarm is not None:
+            self.on_alarm(*event)
+        if answer.refused:
+            raise StreamRefused(answer.reason, refusal_message(answer.reason))
+        if sink is not None:
+            sink(refusal_message(answer.reason))
 
     def _close(self, client_id: str) -> None:
         if self._sinks.pop(client_id, None) is not None:
@@ -265,6 +293,9 @@ class CentreService:
             await asyncio.sleep(min(1.0, self.hang_s / 4))
             proc = self._proc
             limit = self.hang_s if self._ready else self.start_s
+            event = self.area_alarm.poll(self.loop.time())
+            if event is not None and self.on_alarm is not None:
+                self.on_alarm(*event)
             if (self._channel is not None and proc is not None and proc.is_alive()
                     and self.loop.time() - self._last_heard > limit):
                 log.error("centre process %s has not answered for %.0f s: killed", proc.pid, limit)
@@ -508,7 +539,7 @@ class _CentreWorker:
         self.sock = sock
         sock.setblocking(True)
         stations = {k: np.asarray(v, float) for k, v in spec.stations.items()}
-        self.engine = CentreEngine(stations, spec.t_ref_gpst, network_name=spec.network_name)
+        self.engine = CentreEngine(stations, spec.t_ref_gpst, network_name=spec.network_name, area=spec.area)
         self.engine.after_serve = self._flush_vrs  # VRS leave as soon as they exist, before the network solve
         self.engine.serve_group = VRS_GROUP
         gc.freeze()  # the engine's long-lived start-up objects: not scanned by every full collection

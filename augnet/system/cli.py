@@ -32,11 +32,16 @@ def up(
     state: Path = typer.Option(Path("augnet-up.json"), help="Where tools find the URLs and credentials of this run."),
     admin_password: str = typer.Option("", envvar="AUGNET_ADMIN_PASSWORD",
                                        help="Console admin password (first run; default: random, printed)."),
+    service_radius_km: Optional[float] = typer.Option(
+        None, help="VRS served up to this far from the nearest station (default: the largest station spacing)."),
+    outside_area: str = typer.Option("refuse", help="A client outside the service area: refuse, or nearest "
+                                                    "(the nearest station's stream)."),
 ) -> None:
     """Stations, caster, centre, RSSP-I link, trains and console in one asyncio process."""
     settings = SystemSettings(scenario=scenario, trains=trains, duration_s=duration, db_url=db, host=host,
                               caster_port=caster_port, console_port=console_port, bus_url=bus, rbc=rbc,
-                              view=view, report_path=report, state_path=state, admin_password=admin_password)
+                              view=view, report_path=report, state_path=state, admin_password=admin_password,
+                              service_radius_km=service_radius_km, outside_area=outside_area)
     try:
         settings.validate()
         from stations.scenario import load_scenario

@@ -83,7 +83,7 @@ class LivePublisher:
         ages = (np.array(self.correction_age_s[-CORRECTION_AGE_P99_EPOCHS:]) if self.correction_age_s
                 else np.array([np.nan]))
         self.live.set_network({
-            "epoch_gpst": r.t_gpst, "epoch_utc": gtime.to_datetime(r.t_gpst).isoformat(), "master": ne.master,
+            "epoch_gpst": r.t_gpst, "epoch_utc": gtime.gpst_to_utc(r.t_gpst).isoformat(), "master": ne.master,
             "stations_present": len(ne.present), "stations": len(ne.stations), "satellites": int(len(ne.sats)),
             "excluded": sorted(ne.excluded), "sessions": r.sessions,
             "vrs_model": r.vrs_models, "misclosures": ne.misclosures,

@@ -9,13 +9,17 @@ sets every section's status from what the centre can vouch for there:
   DO_NOT_USE  neither is delivering, or no correction model at all (the RBC's own age watchdog also
               turns every section DO_NOT_USE when reports stop).
 Centre alarms (station down, satellite excluded) become RSSP-I alarms; the RBC simulator on the other
-end of a loopback UDP link shows what a real RBC would believe.
+end of a loopback UDP link shows what a real RBC would believe. The RBC's own watchdog alarms (corrections
+stale, link lost) come back to the centre's alarm store through `on_alarm` (`rbc-correction-stale`, ...),
+raised when the RBC raises them and cleared when it clears them, so the console shows every one.
 """
 
 from __future__ import annotations
 
 import asyncio
+import logging
 import math
+from typing import Callable
 
 import numpy as np
 
@@ -24,6 +28,8 @@ from rssp1.endpoint import Endpoint
 from rssp1.messages import AlarmCode, SectionStatus, Severity
 from rssp1.rbc import CentreRbcLink, RbcSimulator
 from rssp1.transport import UdpLink
+
+log = logging.getLogger(__name__)
 
 SECTION_LENGTH_KM = 10.0
 FIXED_ENOUGH = 0.5  # share of a baseline's eligible DD ambiguities fixed for it to count as fixed
@@ -34,6 +40,7 @@ LINK_TIMING = LinkTiming()  # 250 ms main cycle
 MAX_CORRECTION_AGE_S = 5.0  # network-rtk.md: corrections older than ~5 s lose the fix
 ALARM_CODES = {"station-down": AlarmCode.STATION_FAILED, "satellite-fault": AlarmCode.SATELLITE_EXCLUDED}
 SEVERITY = {"info": Severity.INFO, "warning": Severity.WARNING, "critical": Severity.CRITICAL}
+RBC_ALARM_POLL_S = 1.0  # the RBC's watchdog alarms reach the alarm store within this (4 RSSP-I main cycles)
 
 
 class SectionPlan:
@@ -74,10 +81,18 @@ def fixed_stations(fixed_fraction: dict[str, float]) -> set[str]:
     return out
 
 
+def _rbc_kind(code: AlarmCode) -> str:
+    return "rbc-" + code.name.lower().replace("_", "-")
+
+
 class RbcConnection:
     """Both ends of the link on loopback UDP, driven by rssp1's cycle loops."""
 
-    def __init__(self, plan: SectionPlan, station_ids: dict[str, int]):
+    def __init__(self, plan: SectionPlan, station_ids: dict[str, int],
+                 on_alarm: Callable[[str, str, str, str, bool], None] | None = None):
+        self.on_alarm = on_alarm  # on_alarm(kind, subject, severity, message, cleared), as the centre's
+        self._watchdog_seen = 0  # RBC alarms already looked at
+        self._watchdog_open: set[AlarmCode] = set()
         self.plan = plan
         self.station_ids = station_ids
         self.centre = CentreRbcLink(Endpoint(CENTRE_DEVICE, RBC_DEVICE, LINK_TIMING),
@@ -95,6 +110,32 @@ class RbcConnection:
         rbc_link.remote = centre_link.local_address
         self.links = [centre_link, rbc_link]
         self.tasks = [asyncio.ensure_future(link.run()) for link in self.links]
+        if self.on_alarm is not None:
+            self.tasks.append(asyncio.ensure_future(self._forward_alarms()))
+
+    def rbc_alarm_events(self) -> list[tuple[str, str, str, str, bool]]:
+        """The RBC watchdog's alarms raised and cleared since the last call, as alarm-store events."""
+        out = []
+        for a in self.rbc.alarms[self._watchdog_seen:]:
+            if a.origin == "watchdog" and a.code not in self._watchdog_open:
+                self._watchdog_open.add(a.code)
+                out.append((_rbc_kind(a.code), "rbc", "critical", f"RBC: {a.text}", False))
+        self._watchdog_seen = len(self.rbc.alarms)
+        for code in sorted(self._watchdog_open, key=lambda c: c.value):
+            name = code.name.lower()
+            if self.rbc.stats[f"cleared_{name}"] >= self.rbc.stats[f"alarm_{name}"]:
+                self._watchdog_open.discard(code)
+                out.append((_rbc_kind(code), "rbc", "critical", "RBC: cleared", True))
+        return out
+
+    async def _forward_alarms(self) -> None:
+        while True:
+            await asyncio.sleep(RBC_ALARM_POLL_S)
+            try:
+                for event in self.rbc_alarm_events():
+                    self.on_alarm(*event)
+            except Exception:  # noqa: BLE001 - the alarm store's trouble must not stop the link
+                log.exception("RBC alarm forwarding failed")
 
     def on_epoch(self, t_gpst: float, produced_at_s: float, present: set[str], fixed_fraction: dict[str, float],
                  excluded_sats, alarms) -> None:

@@ -27,6 +27,8 @@ RUN_END_MARGIN_S = 10.0  # with --duration, the simulated world runs this much l
 EXTRA_TRAIN_STEP = 0.37
 LINE_END_MARGIN_KM = 10.0
 EXTRA_TRAIN_SPEEDS_KMH = (160.0, 200.0, 250.0, 300.0)
+# The sourcetable's names of the systems a stream carries (STR field 7, NTRIP 2.0: "GPS+GLO+GAL+BDS")
+NAV_SYSTEM_NAMES = {"G": "GPS", "R": "GLO", "E": "GAL", "C": "BDS", "J": "QZS"}
 
 
 def scenario_for_run(settings: SystemSettings, now_gpst: float | None = None) -> Scenario:
@@ -84,19 +86,26 @@ def register_run(db, stations, train_rx, hashes: dict[str, str]) -> dict[str, bo
     return enabled
 
 
+def nav_system(sc: Scenario) -> str:
+    """What the run's streams carry: the scenario's constellations (stations, train receivers and the VRS
+    encode those and no other)."""
+    return "+".join(NAV_SYSTEM_NAMES[s] for s in sc.constellations)
+
+
 def caster_config(settings: SystemSettings, sc: Scenario, stations, train_rx, hashes: dict[str, str]) -> CasterConfig:
     """The caster's mountpoints (a source per station and per train's raw stream, the VRS) and users."""
     mounts = []
+    nav = nav_system(sc)
     for rx in stations:
         llh = np.degrees(ecef_to_geodetic(rx.ecef[0])[:2])
         mounts.append(MountConfig(rx.id, "source", frozenset({TRAIN_GROUP}), frozenset({STATION_GROUP}),
                                   {"identifier": rx.id, "latitude": round(float(llh[0]), 4),
-                                   "longitude": round(float(llh[1]), 4), "network": sc.name}))
+                                   "longitude": round(float(llh[1]), 4), "network": sc.name, "nav_system": nav}))
     for rx in train_rx:
         mounts.append(MountConfig(mountpoint_of("train", rx.id), "source", frozenset({TRAIN_GROUP}),
-                                  frozenset({STATION_GROUP}), {"identifier": f"train {rx.id} raw"}))
+                                  frozenset({STATION_GROUP}), {"identifier": f"train {rx.id} raw", "nav_system": nav}))
     mounts.append(MountConfig(VRS_MOUNT, "vrs", frozenset({TRAIN_GROUP}), frozenset(),
-                              {"identifier": f"{sc.name} VRS", "network": sc.name}))
+                              {"identifier": f"{sc.name} VRS", "network": sc.name, "nav_system": nav}))
     users = {STATION_USER: User(STATION_USER, hashes[STATION_USER], frozenset({STATION_GROUP})),
              TRAIN_USER: User(TRAIN_USER, hashes[TRAIN_USER], frozenset({TRAIN_GROUP}))}
     return CasterConfig(host=settings.host, port=settings.caster_port, identifier="augnet", operator="augnet up",

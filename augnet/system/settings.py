@@ -38,6 +38,10 @@ class SystemSettings:
     report_path: Path | None = None
     state_path: Path | None = Path("augnet-up.json")  # where tools find the URLs and credentials
     admin_password: str = ""  # "" -> a random one, printed once
+    # VRS service area (augnet/centre/service_area.py): max distance from the nearest station [km] (None:
+    # the network's largest station spacing) and what a client outside gets ("refuse" or "nearest")
+    service_radius_km: float | None = None
+    outside_area: str = "refuse"
 
     def validate(self) -> "SystemSettings":
         if self.trains is not None and not 0 <= self.trains <= MAX_LIVE_TRAINS:
@@ -55,4 +59,15 @@ class SystemSettings:
             raise SettingsError("db", f"{self.db_url!r} is not a database URL (e.g. sqlite:///augnet.db)")
         if self.bus_url and not self.bus_url.startswith("nats://"):
             raise SettingsError("bus", f"{self.bus_url!r}: expected nats://host:port or empty (in-process)")
+        if self.service_radius_km is not None and not 0 < self.service_radius_km <= 20_000:
+            raise SettingsError("service-radius-km", "must be > 0 and at most 20,000 km (half the Earth)")
+        if self.outside_area not in ("refuse", "nearest"):
+            raise SettingsError("outside-area", f"{self.outside_area!r}: expected refuse or nearest")
         return self
+
+    def area(self):
+        """The service area of the centre's VRS (`AreaConfig`)."""
+        from augnet.centre.service_area import AreaConfig
+
+        radius = None if self.service_radius_km is None else self.service_radius_km * 1000.0
+        return AreaConfig(max_distance_m=radius, outside=self.outside_area)

@@ -202,7 +202,10 @@ class OnboardTrain:
         return self.k_h * h, self.k_h * float(np.sqrt(max(c[2, 2], 0.0)))
 
     def correction_age_s(self) -> float | None:
-        if self.last is None or not math.isfinite(self.last.solution.age_s):
+        """The age of the corrections the last solution used; None when it used none (before any came, or
+        a single-point solution), as the GGA's age field (onboard/nmea.py), never a 0.0 that means nothing."""
+        if self.last is None or self.stats.vrs_epochs == 0 or not math.isfinite(self.last.solution.age_s) \
+                or self.last.solution.status not in (Status.FIX, Status.FLOAT):
             return None
         return float(self.last.solution.age_s)
 

@@ -27,6 +27,13 @@ router = APIRouter(prefix="/caster", tags=["caster"])
 log = logging.getLogger(__name__)
 
 
+def _check_format(value: str | None) -> None:
+    """The format goes into the sourcetable's STR line: a line end or ';' there would break every client's
+    parse of the table (ntrip_caster/sourcetable.py), so only printable ASCII without ';' is taken: 422."""
+    if value is not None and not all(" " <= c <= "~" and c != ";" for c in value):
+        raise field_error("format", "only printable ASCII without ';' (no line ends or control characters)")
+
+
 def _snapshot(live: LiveState) -> dict | None:
     return live.caster()
 
@@ -84,6 +91,7 @@ async def mountpoints(who: Viewer, live: Live, request: Request) -> list[Mountpo
 @router.post("/mountpoints", response_model=MountpointOut, status_code=status.HTTP_201_CREATED,
              responses={409: {"description": "name taken"}})
 def add_mountpoint(body: MountpointIn, who: Admin, session: DB, live: Live) -> MountpointOut:
+    _check_format(body.format)
     mp = q.add_mountpoint(session, who.name, body.name, body.kind, body.format, body.read_groups, body.write_groups)
     session.commit()
     _tell_system(live, "mountpoint", mp.name, {"action": "add", **body.model_dump()})
@@ -98,6 +106,7 @@ def edit_mountpoint(name: Key, body: MountpointPatch, who: Admin, session: DB, l
     for field, value in given.items():
         if value is None:
             raise field_error(field, "may not be null")
+    _check_format(given.get("format"))
     mp = q.update_mountpoint(session, who.name, name, **given)
     session.commit()
     _tell_system(live, "mountpoint", name, {"action": "edit", **given})

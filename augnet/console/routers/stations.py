@@ -42,6 +42,14 @@ def _out(st: Station | None, sl: StationLive | None, live: LiveState) -> Station
                       along_km=along, in_store=True, live=live_out)
 
 
+def _check_rtcm_id(session, live: LiveState, code: str, rtcm_id: int) -> None:
+    """Two stations with one RTCM id (DF003) would be one station to every rover and to the centre: 422."""
+    taken = [st.code for st in q.list_stations(session) if st.rtcm_station_id == rtcm_id and st.code != code]
+    taken += [sl.id for sl in live.station_list() if sl.station_id == rtcm_id and sl.id != code and sl.id not in taken]
+    if taken:
+        raise field_error("rtcm_station_id", f"RTCM station id {rtcm_id} is already used by station {taken[0]}")
+
+
 def _tell_system(live: LiveState, code: str, change: dict) -> None:
     """The change is committed; a failing system hook must not turn it into an error for the operator."""
     try:
@@ -74,6 +82,7 @@ def get_station(code: Key, who: Viewer, session: DB, live: Live) -> StationOut:
 @router.post("", response_model=StationOut, status_code=status.HTTP_201_CREATED,
              responses={409: {"description": "code taken"}})
 def add_station(body: StationIn, who: Admin, session: DB, live: Live) -> StationOut:
+    _check_rtcm_id(session, live, body.code, body.rtcm_station_id)
     xyz = geo.to_ecef_m(body.lat_deg, body.lon_deg, body.h_m)
     st = q.add_station(session, who.name, body.code, xyz, body.rtcm_station_id, body.mountpoint, body.name)
     session.commit()
@@ -93,6 +102,8 @@ def edit_station(code: Key, body: StationPatch, who: Admin, session: DB, live: L
         if value is None:
             raise field_error(field, "may not be null")
     st = q.get_station(session, code)
+    if "rtcm_station_id" in given:
+        _check_rtcm_id(session, live, code, given["rtcm_station_id"])
     changes = {k: v for k, v in given.items() if k in ("name", "rtcm_station_id", "mountpoint", "enabled")}
     if {"lat_deg", "lon_deg", "h_m"} & given.keys():
         lat, lon, h = geo.to_geodetic_deg(st.x_m, st.y_m, st.z_m)
