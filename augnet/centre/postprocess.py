@@ -11,9 +11,11 @@ or miss epochs. The epochs processed are the time tags at least `MIN_STATIONS_PE
 present and the VRS takes its nearest present station as master.
 
 Satellites in the VRS. Where the network has fixed ambiguities around the point, the VRS carries the
-satellites it has corrections for (interpolated dispersive and non-dispersive DD residuals). While it has
-fewer than `MIN_CORRECTED_SATELLITES` of them (no baseline fixed yet, or a network too sparse to fix, as in
-30 s data over 8 minutes on 35-150 km baselines), the epoch is a single-base VRS: the master's observations
+satellites it has corrections for (interpolated dispersive and non-dispersive DD residuals), counted per system
+as a rover double-differences them (`network_satellites`): a system with fewer than `MIN_SYSTEM_SATELLITES`
+corrected is left out, and while the rest give fewer than `MIN_NETWORK_DD` double differences (no baseline
+fixed yet, or a network too sparse to fix, as in 30 s data over 8 minutes on 35-150 km baselines), the epoch
+is a single-base VRS: the master's observations
 moved geometrically to the point (range, satellite clock, Earth rotation, troposphere model) without
 atmospheric corrections, so a rover sees the master's ionosphere and troposphere errors (decimetres on a
 35 km baseline) but a base at the point. A satellite that switches from single-base to network-corrected
@@ -55,10 +57,12 @@ C = SPEED_OF_LIGHT_M_S
 # An epoch is processed when at least this many stations observed it: one baseline is the least a network
 # solution (and so anything beyond a single-base shift) needs.
 MIN_STATIONS_PER_EPOCH = 2
-# Network-corrected satellites a VRS epoch needs to be written as such; with fewer the epoch is a single-base
-# VRS instead. Across three systems a few satellites give a rover too few double differences per system to fix
-# reliably (docs/decisions/0007-vrs-min-corrected-satellites.md).
-MIN_CORRECTED_SATELLITES = 10
+# A rover double-differences within each system (one reference satellite per system), so a system of n corrected
+# satellites gives it n - 1 DDs; one with fewer than this gives none and is left out of a network epoch.
+MIN_SYSTEM_SATELLITES = 2
+# DDs (summed over the systems left) a network epoch needs, else it is single-base: 3 for a position and 2 to
+# test the integers (6 satellites of one system, 7 of two, 8 of three; decisions 0007, 0160).
+MIN_NETWORK_DD = 5
 # Time tags of different stations are the same epoch when they agree to this [s] (RINEX writes 0.1 us).
 EPOCH_MATCH_S = 1e-3
 # A baseline counts as fixed at an epoch when at least this share of its DD ambiguities is fixed.
@@ -326,13 +330,15 @@ class VrsResult:
     vrs_masters: Counter  # epochs per VRS master station
     epochs: list[StationEpoch]  # the VRS, epoch by epoch (empty epochs left out)
     epoch_mode: list[str]  # per written epoch: 'network' or 'single-base'
-    corrected_sats: list[int]  # per written epoch: satellites with network corrections
+    corrected_sats: list[int]  # per written epoch: satellites with network corrections it carries
     times_processed: int
     skipped_epochs: int  # processed epochs with nothing to write (master without satellites above the point)
     baselines: dict[str, BaselineSummary]
     misclosures: int = 0
     seconds_wall: float = 0.0
     notes: list[str] = field(default_factory=list)
+    # per written epoch: the satellites the network had corrections for around the point, carried or not
+    corrected_sets: list[frozenset] = field(default_factory=list)
 
     @property
     def network_epochs(self) -> int:
@@ -344,6 +350,16 @@ class VrsResult:
             return None
         d = np.round(np.diff(t), 3)
         return float(Counter(d.tolist()).most_common(1)[0][0])
+
+
+def network_satellites(corrected) -> set[str]:
+    """The corrected satellites a network epoch carries: each system with at least MIN_SYSTEM_SATELLITES, when
+    those give at least MIN_NETWORK_DD double differences; else none (the epoch is single-base)."""
+    per_system = Counter(str(s)[0] for s in corrected)
+    systems = {k for k, n in per_system.items() if n >= MIN_SYSTEM_SATELLITES}
+    if sum(per_system[k] - 1 for k in systems) < MIN_NETWORK_DD:
+        return set()
+    return {str(s) for s in corrected if str(s)[0] in systems}
 
 
 def _station_clocks(net: NetworkSolver) -> dict[str, float]:
@@ -386,6 +402,7 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
     epochs: list[StationEpoch] = []
     modes: list[str] = []
     n_corr: list[int] = []
+    corrected_sets: list[frozenset] = []  # per processed epoch with satellites: corrected around the point
     masters: Counter = Counter()
     prev_master = None
     prev_corrected: set[str] = set()
@@ -435,7 +452,9 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
         else:
             vmaster = min(have, key=lambda n: float(np.linalg.norm(stations[n] - point[0])))
             corrected = set()
-        if vrs is not None and len(corrected) >= MIN_CORRECTED_SATELLITES:
+        corrected_sets.append(frozenset(corrected))
+        corrected = network_satellites(corrected)
+        if corrected:
             ep = vrs.station_epoch(0, VRS_MARKER_NAME)
             keep = np.isin(ep.sats, list(corrected))
             ep = ep.subset(keep)
@@ -456,6 +475,7 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
                 ep.lli[lost] |= LLI_LOSS_OF_LOCK
         if not len(ep.sats):
             skipped += 1
+            corrected_sets.pop()
             continue
         prev_master, prev_corrected = vmaster, corrected
         masters[vmaster] += 1
@@ -467,7 +487,8 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
     return VrsResult(point_ecef_m=point[0], stations=inp.stations, excluded=inp.excluded, master=net.master,
                      vrs_masters=masters, epochs=epochs, epoch_mode=modes, corrected_sats=n_corr,
                      times_processed=len(times), skipped_epochs=skipped, baselines=summaries,
-                     misclosures=misclosures, seconds_wall=time.perf_counter() - t_wall)
+                     misclosures=misclosures, seconds_wall=time.perf_counter() - t_wall,
+                     corrected_sets=corrected_sets)
 
 
 # --------------------------------------------------------------------------------------------
