@@ -11,16 +11,18 @@ or miss epochs. The epochs processed are the time tags at least `MIN_STATIONS_PE
 present and the VRS takes its nearest present station as master.
 
 Satellites in the VRS. Where the network has fixed ambiguities around the point, the VRS carries the
-satellites it has corrections for (interpolated dispersive and non-dispersive DD residuals), counted per system
-as a rover double-differences them (`network_satellites`): a system with fewer than `MIN_SYSTEM_SATELLITES`
-corrected is left out, and while the rest give fewer than `MIN_NETWORK_DD` double differences (no baseline
-fixed yet, or a network too sparse to fix, as in 30 s data over 8 minutes on 35-150 km baselines), the epoch
-is a single-base VRS: the master's observations
-moved geometrically to the point (range, satellite clock, Earth rotation, troposphere model) without
-atmospheric corrections, so a rover sees the master's ionosphere and troposphere errors (decimetres on a
-35 km baseline) but a base at the point. A satellite that switches from single-base to network-corrected
-gets a loss-of-lock flag, so a rover restarts its ambiguity instead of absorbing a centimetre-level step;
-so do all satellites when the master station changes (another receiver clock and other ambiguities).
+satellites it has corrections for (interpolated dispersive and non-dispersive DD residuals), counted per
+system as a rover double-differences them (`network_satellites`): a system with fewer than
+`MIN_SYSTEM_SATELLITES` corrected is left out, and while the rest give fewer than `MIN_NETWORK_DD` double
+differences (no baseline fixed yet, or a network too sparse to fix, as in 30 s data over 8 minutes on
+35-150 km baselines), the epoch is a single-base VRS: the master's observations moved geometrically to the
+point (range, satellite clock, Earth rotation, troposphere model) without atmospheric corrections, so a rover
+sees the master's ionosphere and troposphere errors (decimetres on a 35 km baseline) but a base at the point.
+Satellites the network newly corrects enter at rare admission moments, all at once, every satellite flagged
+loss-of-lock there (`vrs_admission.AdmissionPolicy`; `admission=off`: each enters when corrected, flagged on
+its own), so that a rover without partial ambiguity resolution keeps its fix between moments; satellites the
+network loses leave at once. All satellites are flagged when the master station changes (another
+receiver clock and other ambiguities), and that change is a moment too.
 
 Station coordinates come from the RINEX headers (APPROX POSITION XYZ plus ANTENNA: DELTA H/E/N) or from a
 coordinates file (`read_coordinates`): one station a line, `NAME X Y Z` (ECEF metres) or
@@ -47,6 +49,7 @@ from augnet.centre.baseline_config import BaselineConfig
 from augnet.centre.network import NetworkSolver
 from augnet.centre.observations import StationEpoch, from_obsdata
 from augnet.centre.vrs import geometry_many, synthesize
+from augnet.centre.vrs_admission import AdmissionConfig, AdmissionPolicy
 from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
 from augnet.gnss.ephemeris import NavigationData
 from augnet.gnss.geometry import ecef_to_geodetic, enu_to_ecef, geodetic_deg_to_ecef
@@ -339,6 +342,7 @@ class VrsResult:
     notes: list[str] = field(default_factory=list)
     # per written epoch: the satellites the network had corrections for around the point, carried or not
     corrected_sets: list[frozenset] = field(default_factory=list)
+    admission_moments: int = 0  # epochs at which waiting satellites entered, every satellite restarted
 
     @property
     def network_epochs(self) -> int:
@@ -387,9 +391,9 @@ def single_base_epoch(master: StationEpoch, master_xyz_m, point_ecef_m, nav: Nav
 
 
 def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress=None,
-            config: BaselineConfig | None = None) -> VrsResult:
+            config: BaselineConfig | None = None, admission: AdmissionConfig | None = None) -> VrsResult:
     """Solve the network epoch by epoch (with the engine's settings `config`, default when None) and synthesise
-    the VRS at the point."""
+    the VRS at the point, newly corrected satellites entering it as `admission` says (vrs_admission.py)."""
     t_wall = time.perf_counter()
     point = np.asarray(point_ecef_m, float).reshape(1, 3)
     stations = {s.name: s.xyz_m for s in inp.stations}
@@ -406,6 +410,8 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
     masters: Counter = Counter()
     prev_master = None
     prev_corrected: set[str] = set()
+    policy = AdmissionPolicy(admission, network_satellites)
+    restarts = 0
     skipped = 0
     misclosures = 0
     for e, t in enumerate(times):
@@ -453,7 +459,10 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
             vmaster = min(have, key=lambda n: float(np.linalg.norm(stations[n] - point[0])))
             corrected = set()
         corrected_sets.append(frozenset(corrected))
-        corrected = network_satellites(corrected)
+        if prev_master is not None and vmaster != prev_master:
+            policy.restart()
+        decision = policy.step(float(t), corrected)
+        corrected = set(decision.carried)
         if corrected:
             ep = vrs.station_epoch(0, VRS_MARKER_NAME)
             keep = np.isin(ep.sats, list(corrected))
@@ -464,8 +473,8 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
             corrected = set()
             mode = "single-base"
         ep.lli = ep.lli.copy()
-        if prev_master is not None and vmaster != prev_master:
-            ep.lli |= LLI_LOSS_OF_LOCK  # another master: other receiver clock and ambiguities
+        if prev_master is not None and vmaster != prev_master or decision.restart:
+            ep.lli |= LLI_LOSS_OF_LOCK  # another master (other clock and ambiguities), or an admission moment
         else:
             newly = np.array([str(s) in corrected and str(s) not in prev_corrected for s in ep.sats], bool)
             if prev_master is not None and newly.any():
@@ -477,6 +486,7 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
             skipped += 1
             corrected_sets.pop()
             continue
+        restarts += decision.restart
         prev_master, prev_corrected = vmaster, corrected
         masters[vmaster] += 1
         epochs.append(ep)
@@ -488,7 +498,7 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
                      vrs_masters=masters, epochs=epochs, epoch_mode=modes, corrected_sats=n_corr,
                      times_processed=len(times), skipped_epochs=skipped, baselines=summaries,
                      misclosures=misclosures, seconds_wall=time.perf_counter() - t_wall,
-                     corrected_sets=corrected_sets)
+                     corrected_sets=corrected_sets, admission_moments=restarts)
 
 
 # --------------------------------------------------------------------------------------------
@@ -599,6 +609,11 @@ def summary_lines(result: VrsResult) -> list[str]:
         first_net = result.epoch_mode.index("network")
         lines.append(f"{n - net_n} epochs are single-base geometric shifts ({first_net} before the network first "
                      "had corrections around the point, the rest later)")
+    waited = sum(len(c) for c in result.corrected_sets) - sum(result.corrected_sats)
+    if result.admission_moments:
+        lines.append(f"admission moments (waiting satellites entered, every satellite restarted): "
+                     f"{result.admission_moments}; corrected satellite-epochs not carried (waiting, or a system "
+                     f"too thin): {waited}")
     lines.append(f"VRS master station(s): " + ", ".join(f"{m} ({k} epochs)" for m, k in result.vrs_masters.most_common()))
     lines.append(f"processing time {result.seconds_wall:.1f} s")
     return lines
@@ -606,10 +621,11 @@ def summary_lines(result: VrsResult) -> list[str]:
 
 def run_vrs(record: str | os.PathLike, at: str, out: str | os.PathLike, nav=None, coords=None,
             exclude=(), master: str | None = None, marker_name: str = VRS_MARKER_NAME,
-            progress=None, config: BaselineConfig | None = None) -> tuple[VrsResult, list[str]]:
+            progress=None, config: BaselineConfig | None = None,
+            admission: AdmissionConfig | None = None) -> tuple[VrsResult, list[str]]:
     """The whole post-processing: read, solve, synthesise, write. Returns the result and its summary."""
     point = parse_point(at)
     inp = load_network(record, nav=nav, coords=coords, exclude=tuple(exclude))
-    result = process(inp, point, master=master, progress=progress, config=config)
+    result = process(inp, point, master=master, progress=progress, config=config, admission=admission)
     write_vrs(result, out, marker_name)
     return result, summary_lines(result)
