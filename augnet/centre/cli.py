@@ -34,13 +34,15 @@ def vrs(
                                   "admission moments, every satellite restarted there (for rovers without partial "
                                   "AR); off: each enters once corrected (docs/options/vrs.md)"),
     admission_interval_s: Optional[str] = typer.Option(None, "--admission-interval-s", metavar="S",
-                                                       help="least time between admission moments [s]"),
+                                                       help="least time between admission moments, seconds "
+                                                       "(defaults: docs/options/vrs.md)"),
     admission_settle_s: Optional[str] = typer.Option(None, "--admission-settle-s", metavar="S",
-                                                     help="a moment once the corrected set is this long unchanged [s]"),
+                                                     help="a moment once the corrected set is this long "
+                                                     "unchanged, seconds"),
     admission_min_satellites: Optional[str] = typer.Option(None, "--admission-min-satellites", metavar="N",
                                                            help="... or once this many satellites wait"),
     admission_max_wait_s: Optional[str] = typer.Option(None, "--admission-max-wait-s", metavar="S",
-                                                       help="... or once a satellite has waited this long [s]"),
+                                                       help="... or once a satellite has waited this long, seconds"),
 ) -> None:
     """Write a virtual reference station RINEX file for a point from a network's observation files."""
     from augnet.centre.baseline_config import BaselineConfig

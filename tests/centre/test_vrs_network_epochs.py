@@ -17,7 +17,8 @@ CATNET_STATIONS = ("CREU", "EBRE", "GARR")
 UPC1_ECEF_M = (4789013.1051, 176610.1545, 4195034.8712)
 # Network-corrected share of UPC1's 2,880 VRS epochs, measured 2026-12-03: 92.7 % (2,671; the first 50 epochs
 # are before the network's first fix, 1,290-1,500 s, the rest of the single-base ones have 5 or fewer GPS
-# satellites corrected); with admission moments 92.5 % (2,664: entering waits for the set to settle). The floor keeps room for the network engine's start-up to move by half an hour.
+# satellites corrected); with admission moments 92.5 % (2,664: entering waits for the set to settle). The floor
+# keeps room for the network engine's start-up to move by half an hour.
 CATNET_NETWORK_SHARE_FLOOR = 0.85
 
 

@@ -160,8 +160,8 @@ def _rnx2rtkp(rnx2rtkp, conf, out, rover, base, nav):
 
 @pytest.fixture(scope="module")
 def network70(tmp_path_factory):
-    """network-70km recorded for 15 minutes, our VRS at check1 (admission moments on, the default), rnx2rtkp against VRS and every station, with
-    both rnx2rtkp settings."""
+    """network-70km recorded for 15 minutes, our VRS at check1 (admission moments on, the default), rnx2rtkp
+    against VRS and every station, with both rnx2rtkp settings."""
     rnx2rtkp = require_tool("rnx2rtkp")
     d = tmp_path_factory.mktemp("network70")
     sc = load_scenario("network-70km").model_copy(update={"duration_s": DURATION_S, "rate_hz": RATE_HZ})
