@@ -151,6 +151,8 @@ PAGES = (
     ("rtk", "augnet.onboard.rtk", "RtkOptions", "Onboard RTK settings (`augnet rtk --opt NAME=VALUE`)"),
     ("centre", "augnet.centre.baseline_config", "BaselineConfig",
      "Network engine settings (`augnet vrs --opt NAME=VALUE`)"),
+    ("vrs", "augnet.centre.vrs_admission", "AdmissionConfig",
+     "VRS satellite admission (`augnet vrs --admission on|off`, `--admission-NAME VALUE`)"),
 )
 
 

@@ -36,10 +36,25 @@ def vrs(
     end: Optional[str] = typer.Option(None, "--end", metavar="HH:MM[:SS]", help="last epoch to process"),
     opt: Optional[List[str]] = typer.Option(None, "--opt", metavar="NAME=VALUE",
                                             help="a network engine setting (docs/options/centre.md); repeatable"),
+    admission: str = typer.Option("on", "--admission", metavar="on|off",
+                                  help="on: satellites the network newly corrects enter the VRS together at rare "
+                                  "admission moments, every satellite restarted there (for rovers without partial "
+                                  "AR); off: each enters once corrected (docs/options/vrs.md)"),
+    admission_interval_s: Optional[str] = typer.Option(None, "--admission-interval-s", metavar="S",
+                                                       help="least time between admission moments, seconds "
+                                                       "(defaults: docs/options/vrs.md)"),
+    admission_settle_s: Optional[str] = typer.Option(None, "--admission-settle-s", metavar="S",
+                                                     help="a moment once the corrected set is this long "
+                                                     "unchanged, seconds"),
+    admission_min_satellites: Optional[str] = typer.Option(None, "--admission-min-satellites", metavar="N",
+                                                           help="... or once this many satellites wait"),
+    admission_max_wait_s: Optional[str] = typer.Option(None, "--admission-max-wait-s", metavar="S",
+                                                       help="... or once a satellite has waited this long, seconds"),
 ) -> None:
     """Write a virtual reference station RINEX file for a point from a network's observation files."""
     from augnet.centre.baseline_config import BaselineConfig
     from augnet.centre.postprocess import PostprocessError, run_vrs
+    from augnet.centre.vrs_admission import AdmissionConfig, check_config
     from augnet.options import OptionError, with_assignments
 
     try:
@@ -47,6 +62,19 @@ def vrs(
     except OptionError as exc:
         typer.echo(f"error: --opt {exc}", err=True)
         raise typer.Exit(2)
+    flags = {"admission": admission, "interval_s": admission_interval_s, "settle_s": admission_settle_s,
+             "min_satellites": admission_min_satellites, "max_wait_s": admission_max_wait_s}
+    admission_config = AdmissionConfig()
+    for field_name, value in flags.items():
+        if value is None:
+            continue
+        flag = "--admission" + ("" if field_name == "admission" else "-" + field_name.replace("_", "-"))
+        try:
+            admission_config = with_assignments(admission_config, [f"{field_name}={value}"])
+            check_config(admission_config)
+        except OptionError as exc:
+            typer.echo(f"error: {flag} {value}: {exc}", err=True)
+            raise typer.Exit(2)
 
     step = {"next": 0.0}
 
@@ -58,7 +86,7 @@ def vrs(
     try:
         result, lines = run_vrs(record, at, out, nav=nav, coords=coords, exclude=exclude or (), master=master,
                                 marker_name=name, progress=progress, config=config, antex=antex,
-                                start=start, end=end)
+                                start=start, end=end, admission=admission_config)
     except PostprocessError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(2)

@@ -12,14 +12,18 @@ present and the VRS takes its nearest present station as master. `--start`/`--en
 first epoch's day) limit the run to a span: the network starts cold at its first epoch.
 
 Satellites in the VRS. Where the network has fixed ambiguities around the point, the VRS carries the
-satellites it has corrections for (interpolated dispersive and non-dispersive DD residuals). While it has
-fewer than `MIN_CORRECTED_SATELLITES` of them (no baseline fixed yet, or a network too sparse to fix, as in
-30 s data over 8 minutes on 35-150 km baselines), the epoch is a single-base VRS: the master's observations
-moved geometrically to the point (range, satellite clock, Earth rotation, troposphere model) without
-atmospheric corrections, so a rover sees the master's ionosphere and troposphere errors (decimetres on a
-35 km baseline) but a base at the point. A satellite that switches from single-base to network-corrected
-gets a loss-of-lock flag, so a rover restarts its ambiguity instead of absorbing a centimetre-level step;
-so do all satellites when the master station changes (another receiver clock and other ambiguities).
+satellites it has corrections for (interpolated dispersive and non-dispersive DD residuals), counted per
+system as a rover double-differences them (`network_satellites`): a system with fewer than
+`MIN_SYSTEM_SATELLITES` corrected is left out, and while the rest give fewer than `MIN_NETWORK_DD` double
+differences (no baseline fixed yet, or a network too sparse to fix, as in 30 s data over 8 minutes on
+35-150 km baselines), the epoch is a single-base VRS: the master's observations moved geometrically to the
+point (range, satellite clock, Earth rotation, troposphere model) without atmospheric corrections, so a rover
+sees the master's ionosphere and troposphere errors (decimetres on a 35 km baseline) but a base at the point.
+Satellites the network newly corrects enter at rare admission moments, all at once, every satellite flagged
+loss-of-lock there (`vrs_admission.AdmissionPolicy`; `admission=off`: each enters when corrected, flagged on
+its own), so that a rover without partial ambiguity resolution keeps its fix between moments; satellites the
+network loses leave at once. All satellites are flagged when the master station changes (another
+receiver clock and other ambiguities), and that change is a moment too.
 
 Station coordinates come from the RINEX headers (APPROX POSITION XYZ plus ANTENNA: DELTA H/E/N) or from a
 coordinates file (`read_coordinates`): one station a line, `NAME X Y Z` (ECEF metres) or
@@ -61,6 +65,7 @@ from augnet.centre.network import NetworkSolver
 from augnet.centre.observations import StationEpoch, from_obsdata
 from augnet.centre.station_check import CheckResult, StationCheck
 from augnet.centre.vrs import geometry_many, synthesize
+from augnet.centre.vrs_admission import AdmissionConfig, AdmissionPolicy
 from augnet.gnss.antex import NULL_ANTENNA, AntexError, ReceiverAntenna, antennas_for, read_antex
 from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
 from augnet.gnss.ephemeris import NavigationData
@@ -72,10 +77,12 @@ C = SPEED_OF_LIGHT_M_S
 # An epoch is processed when at least this many stations observed it: one baseline is the least a network
 # solution (and so anything beyond a single-base shift) needs.
 MIN_STATIONS_PER_EPOCH = 2
-# Network-corrected satellites a VRS epoch needs to be written as such; with fewer the epoch is a single-base
-# VRS instead. Across three systems a few satellites give a rover too few double differences per system to fix
-# reliably (docs/decisions/0007-vrs-min-corrected-satellites.md).
-MIN_CORRECTED_SATELLITES = 10
+# A rover double-differences within each system (one reference satellite per system), so a system of n corrected
+# satellites gives it n - 1 DDs; one with fewer than this gives none and is left out of a network epoch.
+MIN_SYSTEM_SATELLITES = 2
+# DDs (summed over the systems left) a network epoch needs, else it is single-base: 3 for a position and 2 to
+# test the integers (6 satellites of one system, 7 of two, 8 of three; decisions 0007, 0160).
+MIN_NETWORK_DD = 5
 # Time tags of different stations are the same epoch when they agree to this [s] (RINEX writes 0.1 us).
 EPOCH_MATCH_S = 1e-3
 SECONDS_PER_DAY = 86_400.0
@@ -401,7 +408,7 @@ class VrsResult:
     vrs_masters: Counter  # epochs per VRS master station
     epochs: list[StationEpoch]  # the VRS, epoch by epoch (empty epochs left out)
     epoch_mode: list[str]  # per written epoch: 'network' or 'single-base'
-    corrected_sats: list[int]  # per written epoch: satellites with network corrections
+    corrected_sats: list[int]  # per written epoch: satellites with network corrections it carries
     times_processed: int
     skipped_epochs: int  # processed epochs with nothing to write (master without satellites above the point)
     baselines: dict[str, BaselineSummary]
@@ -409,6 +416,9 @@ class VrsResult:
     seconds_wall: float = 0.0
     station_check: CheckResult | None = None
     notes: list[str] = field(default_factory=list)
+    # per written epoch: the satellites the network had corrections for around the point, carried or not
+    corrected_sets: list[frozenset] = field(default_factory=list)
+    admission_moments: int = 0  # epochs at which waiting satellites entered, every satellite restarted
 
     @property
     def antennas_modelled(self) -> list[str]:
@@ -430,6 +440,16 @@ class VrsResult:
             return None
         d = np.round(np.diff(t), 3)
         return float(Counter(d.tolist()).most_common(1)[0][0])
+
+
+def network_satellites(corrected) -> set[str]:
+    """The corrected satellites a network epoch carries: each system with at least MIN_SYSTEM_SATELLITES, when
+    those give at least MIN_NETWORK_DD double differences; else none (the epoch is single-base)."""
+    per_system = Counter(str(s)[0] for s in corrected)
+    systems = {k for k, n in per_system.items() if n >= MIN_SYSTEM_SATELLITES}
+    if sum(per_system[k] - 1 for k in systems) < MIN_NETWORK_DD:
+        return set()
+    return {str(s) for s in corrected if str(s)[0] in systems}
 
 
 def _station_clocks(net: NetworkSolver) -> dict[str, float]:
@@ -463,10 +483,11 @@ def single_base_epoch(master: StationEpoch, master_xyz_m, point_ecef_m, nav: Nav
 
 def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress=None,
             config: BaselineConfig | None = None, start_s: float | None = None,
-            end_s: float | None = None) -> VrsResult:
+            end_s: float | None = None, admission: AdmissionConfig | None = None) -> VrsResult:
     """Solve the network epoch by epoch (with the engine's settings `config`, default when None) and synthesise
-    the VRS at the point; only the epochs from `start_s` to `end_s` (seconds of the first epoch's day, GPS
-    time) when given: the network starts cold at the first of them."""
+    the VRS at the point, newly corrected satellites entering it as `admission` says (vrs_admission.py); only the
+    epochs from `start_s` to `end_s` (seconds of the first epoch's day, GPS time) when given: the network starts
+    cold at the first of them."""
     t_wall = time.perf_counter()
     point = np.asarray(point_ecef_m, float).reshape(1, 3)
     stations = {s.name: s.xyz_m for s in inp.stations}
@@ -484,9 +505,12 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
     epochs: list[StationEpoch] = []
     modes: list[str] = []
     n_corr: list[int] = []
+    corrected_sets: list[frozenset] = []  # per processed epoch with satellites: corrected around the point
     masters: Counter = Counter()
     prev_master = None
     prev_corrected: set[str] = set()
+    policy = AdmissionPolicy(admission, network_satellites)
+    restarts = 0
     skipped = 0
     misclosures = 0
     check = StationCheck(stations, {s.name: (s.name_a, s.name_b) for s in net.solvers.values()}, inp.nav)
@@ -543,7 +567,12 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
         else:
             vmaster = min(have, key=lambda n: float(np.linalg.norm(stations[n] - point[0])))
             corrected = set()
-        if vrs is not None and len(corrected) >= MIN_CORRECTED_SATELLITES:
+        corrected_sets.append(frozenset(corrected))
+        if prev_master is not None and vmaster != prev_master:
+            policy.restart()
+        decision = policy.step(float(t), corrected)
+        corrected = set(decision.carried)
+        if corrected:
             ep = vrs.station_epoch(0, VRS_MARKER_NAME)
             keep = np.isin(ep.sats, list(corrected))
             ep = ep.subset(keep)
@@ -554,8 +583,8 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
             corrected = set()
             mode = "single-base"
         ep.lli = ep.lli.copy()
-        if prev_master is not None and vmaster != prev_master:
-            ep.lli |= LLI_LOSS_OF_LOCK  # another master: other receiver clock and ambiguities
+        if prev_master is not None and vmaster != prev_master or decision.restart:
+            ep.lli |= LLI_LOSS_OF_LOCK  # another master (other clock and ambiguities), or an admission moment
         else:
             newly = np.array([str(s) in corrected and str(s) not in prev_corrected for s in ep.sats], bool)
             if prev_master is not None and newly.any():
@@ -565,7 +594,9 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
                 ep.lli[lost] |= LLI_LOSS_OF_LOCK
         if not len(ep.sats):
             skipped += 1
+            corrected_sets.pop()
             continue
+        restarts += decision.restart
         prev_master, prev_corrected = vmaster, corrected
         masters[vmaster] += 1
         epochs.append(ep)
@@ -577,7 +608,8 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
                      vrs_masters=masters, epochs=epochs, epoch_mode=modes, corrected_sats=n_corr,
                      times_processed=len(times), skipped_epochs=skipped, baselines=summaries,
                      misclosures=misclosures, seconds_wall=time.perf_counter() - t_wall,
-                     station_check=checked if checked is not None else _judge_stations(check))
+                     station_check=checked if checked is not None else _judge_stations(check),
+                     corrected_sets=corrected_sets, admission_moments=restarts)
 
 
 def _judge_stations(check: StationCheck) -> CheckResult:
@@ -728,6 +760,11 @@ def summary_lines(result: VrsResult) -> list[str]:
         first_net = result.epoch_mode.index("network")
         lines.append(f"{n - net_n} epochs are single-base geometric shifts ({first_net} before the network first "
                      "had corrections around the point, the rest later)")
+    waited = sum(len(c) for c in result.corrected_sets) - sum(result.corrected_sats)
+    if result.admission_moments:
+        lines.append(f"admission moments (waiting satellites entered, every satellite restarted): "
+                     f"{result.admission_moments}; corrected satellite-epochs not carried (waiting, or a system "
+                     f"too thin): {waited}")
     lines.append(f"VRS master station(s): " + ", ".join(f"{m} ({k} epochs)" for m, k in result.vrs_masters.most_common()))
     lines.append(f"processing time {result.seconds_wall:.1f} s")
     return lines
@@ -736,7 +773,7 @@ def summary_lines(result: VrsResult) -> list[str]:
 def run_vrs(record: str | os.PathLike, at: str, out: str | os.PathLike, nav=None, coords=None,
             exclude=(), master: str | None = None, marker_name: str = VRS_MARKER_NAME,
             progress=None, config: BaselineConfig | None = None, antex=None, start: str | None = None,
-            end: str | None = None) -> tuple[VrsResult, list[str]]:
+            end: str | None = None, admission: AdmissionConfig | None = None) -> tuple[VrsResult, list[str]]:
     """The whole post-processing: read, solve, synthesise, write. Returns the result and its summary."""
     point = parse_point(at)
     start_s = parse_time_of_day(start, "--start") if start else None
@@ -744,6 +781,7 @@ def run_vrs(record: str | os.PathLike, at: str, out: str | os.PathLike, nav=None
     if start_s is not None and end_s is not None and end_s <= start_s:
         raise PostprocessError(f"--end {end} is not after --start {start}")
     inp = load_network(record, nav=nav, coords=coords, exclude=tuple(exclude), antex=antex)
-    result = process(inp, point, master=master, progress=progress, config=config, start_s=start_s, end_s=end_s)
+    result = process(inp, point, master=master, progress=progress, config=config, start_s=start_s, end_s=end_s,
+                     admission=admission)
     write_vrs(result, out, marker_name)
     return result, summary_lines(result)
