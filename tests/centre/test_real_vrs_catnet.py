@@ -185,8 +185,9 @@ def upc(tmp_path_factory, shared_data):
     for r in ROVERS:
         for setting, conf in SETTINGS.items():
             for base, path in (("VRS", vrs_path), (NEAREST, net / f"{NEAREST}0770.10o")):
-                sol = _rnx2rtkp(exe, KINEMATIC, d, f"{r}-{base}-{setting}", rovers[r], path, nav)
+                sol = _rnx2rtkp(exe, conf, d, f"{r}-{base}-{setting}", rovers[r], path, nav)
                 figures[(r, setting, base)] = _figures(sol, truth[r])
+                figures_saas[(r, setting, base)] = _figures(sol, truth_saas[r])
     gf = {base: dd_geometry_free_scatter_m(rovers["UPC1"], path)
           for base, path in (("VRS", vrs_path), (NEAREST, net / f"{NEAREST}0770.10o"))}
     print("\n" + "\n".join(summary))
