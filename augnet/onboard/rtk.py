@@ -48,8 +48,8 @@ from augnet.gnss.ambiguity import BIASED_FLOAT_FALSE_ALARM
 from augnet.gnss.ephemeris import NavigationData
 from augnet.gnss.fix_confirmation import FixConfirmation, IntegerDecision
 from augnet.gnss.state_layout import StateLayout
-from augnet.onboard import ionosphere_prior
-from augnet.onboard.cycleslip import BASE_GF_DRIFT_M_S, BASE_GF_SLIP_THRESHOLD_M, SlipDetector
+from augnet.onboard import correction_age, ionosphere_prior
+from augnet.onboard.cycleslip import BASE_GF_DRIFT_M_S, BASE_GF_SLIP_THRESHOLD_M, BASE_MAX_ARC_GAP_S, SlipDetector
 from augnet.onboard.double_difference import (
     AMB_KNOWN_SIGMA_CYC,
     DDIndex,
@@ -156,6 +156,9 @@ SPP_CONSISTENCY_M = 30.0
 MAX_FLOAT_COVARIANCE_TRACE_M2 = 1e6
 # Fixed solutions whose DD phase residuals exceed this [m] are rejected (wrong fix).
 MAX_FIXED_PHASE_RESIDUAL_M = 0.05
+# ... plus this many sigmas of the row's error from aged corrections (correction_age; 3: a 0.3 % false alarm
+# per row when the age dominates).
+AGE_RESIDUAL_SIGMAS = 3.0
 # With the ionosphere in the model, a validated fix is declared only when the same integers have been
 # found in this many consecutive epochs (a biased float can pass one epoch's tests by chance).
 CONFIRM_EPOCHS_WITH_IONOSPHERE = 3
@@ -205,6 +208,12 @@ class RtkOptions:
                                       source="1-3 cm DD at 30-70 km spacing (network-rtk.md: Tang et al. 2016)")
     confirm_epochs: int | None = setting(None, doc="consecutive agreeing fixes before FIX; None: 1, or 3 with "
                                          "the ionosphere estimated")
+    age_variance: bool = setting(True, doc="inflate the DD covariance with the corrections' age (satellite clock "
+                                 "drift since the base epoch, common to a satellite's slots, code and phase)",
+                                 source="RTKLIB stats-clkstab; docs/decisions/0162")
+    tropo_humidity: float = setting(0.7, doc="relative humidity of the Saastamoinen troposphere at both "
+                                    "receivers; 0: hydrostatic part only (RTKLIB 2.4.3's relative-mode model)",
+                                    source="RTKLIB REL_HUMI 0.7; rtkpos.c zdres (hydrostatic)")
     accel_sigma_h: float = setting(3.0, unit="m/s^2/sqrt(s)", doc="dynamics: horizontal white-jerk process "
                                    "noise (a train brakes at ~1 m/s^2; a road vehicle changes faster)")
     accel_sigma_v: float = setting(1.0, unit="m/s^2/sqrt(s)", doc="dynamics: vertical white-jerk process noise")
@@ -319,7 +328,9 @@ class RtkFilter:
         self.initialised = False
         self.t_prev = math.nan
         self.rover_slips = SlipDetector()
-        self.base_slips = SlipDetector(gf_threshold_m=BASE_GF_SLIP_THRESHOLD_M, gf_drift_m_s=BASE_GF_DRIFT_M_S)
+        self.base_slips = SlipDetector(max_gap_s=BASE_MAX_ARC_GAP_S, gf_threshold_m=BASE_GF_SLIP_THRESHOLD_M,
+                                       gf_drift_m_s=BASE_GF_DRIFT_M_S)
+        self._age_var = None  # this epoch's per-satellite SD variance from the corrections' age [m^2]
         self._base_checked_time = math.nan
         self._base_ok = True
         self._base_msg = ""
@@ -535,6 +546,7 @@ class RtkFilter:
         ep = self._common_epoch(rover, base, sp_rover, sp_base)
         if ep is None:
             return self._single(t, spp, "no satellites common to rover and base", age)
+        self._age_var = correction_age.sd_variance_m2(age, len(ep.sats)) if opt.age_variance else None
         self._restart_slipped(ep)
         self._expire_states(t)
         # linearisation point: the state's position, or for a white-noise position (kinematic without
@@ -590,7 +602,7 @@ class RtkFilter:
         valid = sp_r.valid & sp_b.valid
         # same issue of data at both ends, or the orbit error does not cancel
         valid &= sp_r.ephemeris_index == sp_b.ephemeris_index
-        zd_base = zero_differences(bo, self.base_position_m, sp_b)
+        zd_base = zero_differences(bo, self.base_position_m, sp_b, self.opt.tropo_humidity)
         wl = ro.wavelength_m[:, :nf]
         same_wl = np.isclose(wl, bo.wavelength_m[:, :nf], rtol=0, atol=1e-9)
         sats = [str(s) for s in ro.sats]
@@ -632,7 +644,8 @@ class RtkFilter:
 
     def _single_differences(self, ep: _CommonEpoch, x_rov: np.ndarray) -> SingleDifferences:
         """The epoch's SDs with the rover model evaluated at x_rov."""
-        return single_differences(zero_differences(ep.rover, x_rov, ep.sp_rover), ep.zd_base, ep.nf)
+        return single_differences(zero_differences(ep.rover, x_rov, ep.sp_rover, self.opt.tropo_humidity), ep.zd_base,
+                                  ep.nf)
 
     def _phase_variance(self, el: np.ndarray) -> np.ndarray:
         return phase_variance(el, self.opt.phase_sigma_a_m, self.opt.phase_sigma_b_m)
@@ -682,7 +695,7 @@ class RtkFilter:
     def _rows(self, ep: _CommonEpoch, dd: DDIndex, sd: SingleDifferences, var_sd: np.ndarray,
               keep: np.ndarray | None) -> Rows:
         """The DD rows at the SDs' linearisation point, those of `keep` only (None: all)."""
-        return dd_rows(dd, sd, ep.wl, ep.mu, var_sd, self.x, self._code_phase_ratio()).select(keep)
+        return dd_rows(dd, sd, ep.wl, ep.mu, var_sd, self.x, self._code_phase_ratio(), self._age_var).select(keep)
 
     def _screened_rows(self, ep: _CommonEpoch, dd: DDIndex, groups, sd: SingleDifferences, x_rov: np.ndarray,
                        var_sd: np.ndarray) -> tuple[DDIndex, Rows, np.ndarray]:
@@ -860,9 +873,10 @@ class RtkFilter:
                     res = phase_residuals(dd, rows, sd, ep.wl, ep.mu, x_lin, self.x)
                     rows = np.delete(rows, int(np.argmax(np.abs(res))))
                 continue
-            worst = int(np.argmax(np.abs(result.residuals)))
-            residual_ok = abs(result.residuals[worst]) <= MAX_FIXED_PHASE_RESIDUAL_M
-            if result.sigma_m > MAX_FIXED_POSITION_SIGMA_M:
+            max_sigma, max_res = self._fixed_limits(dd, rows, sd)
+            worst = int(np.argmax(np.abs(result.residuals) / max_res))
+            residual_ok = abs(result.residuals[worst]) <= max_res[worst]
+            if result.sigma_m > max_sigma:
                 # A partial fix of a few combinations (wide-lane-like) can pass its tests and still leave
                 # the position at float precision: that is not an RTK fix and is not reported as one,
                 # but its integers are a decision the next epochs' fixes must agree with.
@@ -887,6 +901,27 @@ class RtkFilter:
         else:
             self.confirmation.reset()
         sol.message = message
+
+    def _fixed_limits(self, dd: DDIndex, rows: np.ndarray, sd: SingleDifferences) -> tuple[float, np.ndarray]:
+        """The largest 3-D position sigma [m] and DD phase residuals [m] (per row) a fixed solution of `rows`
+        may have: MAX_FIXED_POSITION_SIGMA_M and MAX_FIXED_PHASE_RESIDUAL_M, grown by what aged corrections
+        alone give a fixed solution (the position covariance (G^T A^-1 G)^-1 of the age's DD covariance A,
+        the rows' own age sigma times AGE_RESIDUAL_SIGMAS): the age is no reason to doubt the integers."""
+        if self._age_var is None or not np.any(self._age_var > 0.0):
+            return MAX_FIXED_POSITION_SIGMA_M, np.full(len(rows), MAX_FIXED_PHASE_RESIDUAL_M)
+        k, ref = dd.k[rows], dd.ref[rows]
+        A = correction_age.dd_covariance(k, ref, self._age_var)
+        max_res = np.sqrt(MAX_FIXED_PHASE_RESIDUAL_M**2 + AGE_RESIDUAL_SIGMAS**2 * np.diag(A))
+        # one slot's rows (the others carry the same age error): the age-only fixed position covariance
+        f0 = np.bincount(dd.f[rows]).argmax()
+        sel = dd.f[rows] == f0
+        G = -(sd.los[k[sel]] - sd.los[ref[sel]])
+        try:
+            Ai = np.linalg.inv(A[np.ix_(sel, sel)])
+            age_var = float(np.trace(np.linalg.inv(G.T @ Ai @ G)))
+        except np.linalg.LinAlgError:
+            age_var = 0.0
+        return math.sqrt(MAX_FIXED_POSITION_SIGMA_M**2 + max(age_var, 0.0)), max_res
 
     def _declare_or_confirm(self, sol: RtkSolution, dd: DDIndex, ep: _CommonEpoch, rows: np.ndarray,
                             attempt: _FixAttempt, n_all: int) -> None:
