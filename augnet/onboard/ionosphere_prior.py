@@ -9,6 +9,8 @@ grows with the distance to a physical base (IONO_SIGMA_PER_M).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from augnet.gnss.ionosphere import thin_shell_mapping
@@ -59,3 +61,87 @@ def prior_variance(sigma0: float, slant_mapping):
 def process_variance(sigma0: float, dt_s: float) -> float:
     """Random-walk variance [m^2] an SD ionosphere state gathers over dt_s."""
     return (IONO_PROCESS_FRACTION_PER_SQRT_S * sigma0) ** 2 * dt_s
+
+
+# --- the learned prior (`RtkOptions.iono_prior = "learned"`) -------------------------------------------
+# How fast the SD ionosphere moves, from the SD (rover - base) geometry-free phase at simultaneous epochs:
+# per satellite, increments over one interval and over at least LEARN_LAG_S (and three intervals); for white
+# phase noise s and a random walk of rate q, E[d^2] = 2 s^2 + q dt, so the two mean squares give q whatever
+# the interval (the centre's estimator, augnet/centre/ionosphere_prior.py IonosphereActivity).
+LEARN_LAG_S = 90.0
+# Increments over the lag needed before the learned rate counts (a 30 s base, 8 satellites: ~3 minutes).
+LEARN_MIN_SAMPLES = 40
+# Exponential smoothing of the increments' mean squares [epochs of the base].
+LEARN_TAU_EPOCHS = 30.0
+# The prior sigma0 is this times the rate [ppm of the baseline per ppm/sqrt(s)]: the centre's figure fitted on
+# the simulator's quiet to storm levels (decision 0103, iono_activity_ppm_per_rate).
+LEARNED_PPM_PER_RATE = 150.0
+# ... and never below this [ppm of the baseline, vertical]: the centre's floor of a day's level (decision 0102).
+LEARNED_FLOOR_PPM = 0.7
+PPM = 1.0e-6
+# A vertical SD geometry-free step beyond this [m, in units of the first frequency's delay] is a slip the
+# detectors missed (a reference receiver's unflagged phase reset, decision 0150), not ionosphere: the arc restarts.
+LEARN_SLIP_M = 0.3
+# A state's prior is tightened to the learned one only when that is this much tighter (the centre's share).
+PRIOR_TIGHTER_SHARE = 0.9
+
+
+class LearnedPrior:
+    """The SD vertical ionosphere prior learned from the data: LEARNED_PPM_PER_RATE times the measured rate of
+    the SD geometry-free phase, in ppm of the baseline; None until LEARN_MIN_SAMPLES long increments."""
+
+    def __init__(self):
+        self._hist: dict[str, list[tuple[float, float]]] = {}  # sat -> (t, slant SD GF in units of I1 [m])
+        self._means: np.ndarray | None = None  # mean squares and spans: short [m^2, s], long [m^2, s]
+        self._samples = 0
+
+    def observe(self, t: float, sats, sd_gf_m: np.ndarray, gamma_minus_1: np.ndarray, el_rad: np.ndarray,
+                restarted) -> None:
+        """One simultaneous epoch: SD geometry-free phase lambda1 phi1 - lambda2 phi2 [m] per satellite (NaN
+        without), (f1/f2)^2 - 1, the elevations, and the satellites whose arc restarted (a slip)."""
+        # slant, in units of the first frequency's delay; increments scaled to vertical (the arc's constant
+        # ambiguity would not survive the mapping)
+        slant = sd_gf_m / gamma_minus_1
+        to_vert = 1.0 / mapping(el_rad)
+        short, long_ = [], []
+        for k, s in enumerate(sats):
+            if s in restarted:
+                self._hist.pop(s, None)
+            if not np.isfinite(slant[k]) or not np.isfinite(to_vert[k]):
+                continue
+            h = self._hist.setdefault(s, [])
+            if h and abs(slant[k] - h[-1][1]) * to_vert[k] > LEARN_SLIP_M:
+                h.clear()
+            if h:
+                dt = t - h[-1][0]
+                short.append((((slant[k] - h[-1][1]) * to_vert[k]) ** 2, dt))
+                span = max(LEARN_LAG_S, 3.0 * dt)
+                old = next((p for p in reversed(h) if t - p[0] >= span - 1e-6), None)
+                if old is not None:
+                    long_.append((((slant[k] - old[1]) * to_vert[k]) ** 2, t - old[0]))
+                while len(h) > 1 and t - h[1][0] >= span - 1e-6:
+                    h.pop(0)
+            h.append((t, float(slant[k])))
+        if not short or not long_:
+            return
+        now = np.array([np.mean([d for d, _ in short]), np.mean([d for _, d in short]),
+                        np.mean([d for d, _ in long_]), np.mean([d for _, d in long_])])
+        self._means = now if self._means is None else self._means + (now - self._means) / LEARN_TAU_EPOCHS
+        self._samples += len(long_)
+
+    def rate_m_sqrt_s(self) -> float | None:
+        """The SD vertical ionosphere's random-walk rate [m/sqrt(s)], None until learned."""
+        if self._means is None or self._samples < LEARN_MIN_SAMPLES:
+            return None
+        ms_short, dt_short, ms_long, dt_long = self._means
+        if not dt_long > dt_short:
+            return None
+        return math.sqrt(max(ms_long - ms_short, 0.0) / (dt_long - dt_short))
+
+    def sigma0_m(self, baseline_m: float) -> float | None:
+        """The learned prior sigma [m] of the SD vertical ionosphere on the first frequency, None until learned."""
+        rate = self.rate_m_sqrt_s()
+        if rate is None:
+            return None
+        rate_ppm = rate / (PPM * baseline_m)
+        return max(LEARNED_FLOOR_PPM, LEARNED_PPM_PER_RATE * rate_ppm) * PPM * baseline_m

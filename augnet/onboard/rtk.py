@@ -202,7 +202,11 @@ class RtkOptions:
     ionosphere: str = setting("auto", doc="SD ionosphere per satellite: auto (for a VRS or beyond ~7 km), "
                               "estimate (always), off (short-baseline model)", choices=("auto", "estimate", "off"))
     iono_sigma_m: float | None = setting(None, unit="m", doc="prior sigma of the SD vertical ionosphere; None: "
-                                         "vrs_iono_sigma_m for a VRS, else 2 mm per km of baseline")
+                                         "vrs_iono_sigma_m for a VRS, else by iono_prior")
+    iono_prior: str = setting("per_km", doc="a physical base's SD ionosphere prior: per_km (2 mm per km of "
+                              "baseline), learned (from the SD geometry-free phase's rate, once known; "
+                              "ionosphere_prior.LearnedPrior)", choices=("per_km", "learned"),
+                              source="docs/decisions/0162")
     vrs_iono_sigma_m: float = setting(0.02, unit="m", doc="prior sigma of the SD vertical ionosphere against a "
                                       "network VRS (the network's interpolation residual)",
                                       source="1-3 cm DD at 30-70 km spacing (network-rtk.md: Tang et al. 2016)")
@@ -319,6 +323,9 @@ class RtkFilter:
         self.amb_serial: dict[tuple[str, int], int] = {}
         self._serials = 0
         self.ion_seen: dict[str, float] = {}  # when each SD ionosphere state was last observed
+        self.ion_prior_var: dict[str, float] = {}  # the prior variance each SD ionosphere state has [m^2]
+        self._learned = ionosphere_prior.LearnedPrior()
+        self._iono_decided = False  # learned prior: the model chosen on the learned sigma (then sticky)
         self.iono_active = False
         self._iono_sigma_now = 0.0
         self.confirmation = FixConfirmation(self.opt.min_fix_ambiguities)
@@ -382,9 +389,11 @@ class RtkFilter:
     def _new_ion(self, sat: str, var: float, t: float) -> None:
         self.layout.add(("ion", sat), 0.0, var)
         self.ion_seen[sat] = t
+        self.ion_prior_var[sat] = var
 
     def _drop_ion(self, sat: str) -> None:
         self.ion_seen.pop(sat, None)
+        self.ion_prior_var.pop(sat, None)
         self.layout.remove([("ion", sat)])
 
     # -----------------------------------------------------------------------------------------
@@ -547,6 +556,8 @@ class RtkFilter:
         if ep is None:
             return self._single(t, spp, "no satellites common to rover and base", age)
         self._age_var = correction_age.sd_variance_m2(age, len(ep.sats)) if opt.age_variance else None
+        if opt.iono_prior == "learned" and ep.nf >= 2 and abs(age) < correction_age.MIN_AGE_S:
+            self._learn_ionosphere(ep)
         self._restart_slipped(ep)
         self._expire_states(t)
         # linearisation point: the state's position, or for a white-noise position (kinematic without
@@ -557,6 +568,8 @@ class RtkFilter:
         ok, var_sd = self._usable(ep, sd)
         sigma0 = self._switch_ionosphere(baseline_m)
         self._add_states(ep, ok, sd.el, sigma0)
+        if opt.iono_prior == "learned" and self.iono_active:
+            self._tighten_ionosphere(sigma0, sd.el, ep.sats)
         groups = choose_groups(opt.systems, ep.sys_, ok, sd.el, ep.nf, self._amb_variances(ep.sats, ok))
         n_sat_used = len({k for g in groups for k in g.sats})
         if not groups:
@@ -655,10 +668,53 @@ class RtkFilter:
         baseline long enough to need it, and then stays."""
         opt = self.opt
         sigma0 = ionosphere_prior.iono_sigma0(baseline_m, self.base_is_vrs, opt.iono_sigma_m, opt.vrs_iono_sigma_m)
-        if ionosphere_prior.estimate_ionosphere(opt.ionosphere, sigma0):
+        estimate = ionosphere_prior.estimate_ionosphere(opt.ionosphere, sigma0)
+        if opt.iono_prior == "learned" and opt.iono_sigma_m is None and not self.base_is_vrs and not self._iono_decided:
+            learned = self._learned.sigma0_m(baseline_m)
+            if learned is not None:
+                # the model chosen once on the learned prior; until then the per-km one, not committed to
+                sigma0 = learned
+                estimate = ionosphere_prior.estimate_ionosphere(opt.ionosphere, sigma0)
+                self._iono_decided = True
+            if not estimate and self.iono_active:
+                for sat in list(self.ion_seen):
+                    self._drop_ion(sat)
+                self.confirmation.reset()
+                self.iono_active = False
+        elif opt.iono_prior == "learned" and self._iono_decided and opt.iono_sigma_m is None and not self.base_is_vrs:
+            learned = self._learned.sigma0_m(baseline_m)
+            sigma0 = learned if learned is not None else sigma0
+            estimate = ionosphere_prior.estimate_ionosphere(opt.ionosphere, sigma0)
+        if estimate:
             self.iono_active = True
         self._iono_sigma_now = sigma0
         return sigma0
+
+    def _learn_ionosphere(self, ep: _CommonEpoch) -> None:
+        """Feed the learned prior this simultaneous epoch's SD geometry-free phases."""
+        gf = lambda o: o.phase_cyc[:, 0] * ep.wl[:, 0] - o.phase_cyc[:, 1] * ep.wl[:, 1]  # noqa: E731
+        sd_gf = np.where(ep.same_wl.all(axis=1), gf(ep.rover) - gf(ep.base), np.nan)
+        restarted = {s for s, slip in zip(ep.sats, ep.slips.any(axis=1)) if slip}
+        self._learned.observe(ep.t, ep.sats, sd_gf, ep.mu[:, 1] - 1.0, ep.zd_base.el, restarted)
+
+    def _tighten_ionosphere(self, sigma0: float, el: np.ndarray, sats: list[str]) -> None:
+        """SD ionosphere states whose prior is wider than the learned one get a zero pseudo-observation making
+        up the difference (1/new = 1/old + 1/extra), as if they had started with it (the centre's way,
+        docs/decisions/0103)."""
+        m = ionosphere_prior.mapping(el)
+        for k, sat in enumerate(sats):
+            i = self.ion_state(sat)
+            old = self.ion_prior_var.get(sat)
+            if i is None or old is None:
+                continue
+            new = ionosphere_prior.prior_variance(sigma0, m[k])
+            if not new < ionosphere_prior.PRIOR_TIGHTER_SHARE * old:
+                continue
+            extra = 1.0 / (1.0 / new - 1.0 / old)
+            H = np.zeros((1, len(self.x)))
+            H[0, i] = 1.0
+            self._kalman_update(np.array([-self.x[i]]), H, np.array([[extra]]))
+            self.ion_prior_var[sat] = new
 
     def _add_states(self, ep: _CommonEpoch, ok: np.ndarray, el: np.ndarray, sigma0: float) -> None:
         """New SD ambiguities from code (cycles) for usable observations without one, and new SD
