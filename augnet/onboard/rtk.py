@@ -962,8 +962,11 @@ class RtkFilter:
         """The largest 3-D position sigma [m] and DD phase residuals [m] (per row) a fixed solution of `rows`
         may have: MAX_FIXED_POSITION_SIGMA_M and MAX_FIXED_PHASE_RESIDUAL_M, grown by what aged corrections
         alone give a fixed solution (the position covariance (G^T A^-1 G)^-1 of the age's DD covariance A,
-        the rows' own age sigma times AGE_RESIDUAL_SIGMAS): the age is no reason to doubt the integers."""
-        if self._age_var is None or not np.any(self._age_var > 0.0):
+        the rows' own age sigma times AGE_RESIDUAL_SIGMAS): the age is no reason to doubt integers already
+        fixed.  Only while a declared fix continues: a new fix needs the limits themselves (with a 30 s base a
+        1 Hz rover reuses each base epoch's noise 30 times, and the float grows overconfident between base
+        epochs: at 144 km relaxed limits let 6-of-14 partial fixes 80 cm off through, docs/decisions/0162)."""
+        if self._age_var is None or not np.any(self._age_var > 0.0) or self.consecutive_fixes == 0:
             return MAX_FIXED_POSITION_SIGMA_M, np.full(len(rows), MAX_FIXED_PHASE_RESIDUAL_M)
         k, ref = dd.k[rows], dd.ref[rows]
         A = correction_age.dd_covariance(k, ref, self._age_var)
