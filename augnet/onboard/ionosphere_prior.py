@@ -86,14 +86,53 @@ LEARN_SLIP_M = 0.3
 PRIOR_TIGHTER_SHARE = 0.9
 
 
+# The day's level, once satellites are fixed: this times the one-sided 95 % upper bound of the RMS of the fixed
+# satellites' vertical SD ionosphere (the centre's iono_prior_adapt, decision 0102), over a running mean square
+# with this time constant [s], from at least DAY_MIN_SATS satellites.
+DAY_ADAPT = 1.2
+DAY_TAU_S = 300.0
+DAY_MIN_SATS = 4
+UPPER_BOUND_Z = 1.645
+
+
+def rms_upper_bound_factor(n: int, z: float = UPPER_BOUND_Z) -> float:
+    """sqrt(n / chi2_{5 %}(n)): the one-sided 95 % upper bound of an RMS of n samples over the RMS
+    (Wilson-Hilferty), as the centre's."""
+    q = n * (1.0 - 2.0 / (9.0 * n) - z * math.sqrt(2.0 / (9.0 * n))) ** 3
+    return math.sqrt(n / q)
+
+
 class LearnedPrior:
-    """The SD vertical ionosphere prior learned from the data: LEARNED_PPM_PER_RATE times the measured rate of
-    the SD geometry-free phase, in ppm of the baseline; None until LEARN_MIN_SAMPLES long increments."""
+    """The SD vertical ionosphere prior learned from the data, in two stages: LEARNED_PPM_PER_RATE times the
+    measured rate of the SD geometry-free phase (once LEARN_MIN_SAMPLES long increments), then, once satellites
+    are fixed with the ionosphere in the model, the day's level from their estimated DD ionosphere."""
 
     def __init__(self):
         self._hist: dict[str, list[tuple[float, float]]] = {}  # sat -> (t, slant SD GF in units of I1 [m])
         self._means: np.ndarray | None = None  # mean squares and spans: short [m^2, s], long [m^2, s]
         self._samples = 0
+        self._day_ms: float | None = None  # running mean square of the fixed satellites' vertical SD ionosphere
+        self._day_n = 0
+        self._day_t = math.nan
+
+    @property
+    def stage(self) -> int:
+        """0: nothing learned, 1: the rate, 2: the day's level."""
+        if self._day_ms is not None:
+            return 2
+        return 1 if self.rate_m_sqrt_s() is not None else 0
+
+    def learn_fixed(self, t: float, sd_vertical_m: np.ndarray) -> None:
+        """A declared fix's satellites' SD vertical ionosphere [m] (DD over sqrt(M_k^2 + M_ref^2))."""
+        q = sd_vertical_m[np.isfinite(sd_vertical_m)]
+        if q.size < DAY_MIN_SATS:
+            return
+        ms = float(np.mean(q**2))
+        if self._day_ms is None:
+            self._day_ms = ms
+        else:
+            self._day_ms += min(1.0, max(t - self._day_t, 0.0) / DAY_TAU_S) * (ms - self._day_ms)
+        self._day_n, self._day_t = q.size, t
 
     def observe(self, t: float, sats, sd_gf_m: np.ndarray, gamma_minus_1: np.ndarray, el_rad: np.ndarray,
                 restarted) -> None:
@@ -140,6 +179,9 @@ class LearnedPrior:
 
     def sigma0_m(self, baseline_m: float) -> float | None:
         """The learned prior sigma [m] of the SD vertical ionosphere on the first frequency, None until learned."""
+        floor = LEARNED_FLOOR_PPM * PPM * baseline_m
+        if self._day_ms is not None:
+            return max(floor, DAY_ADAPT * math.sqrt(self._day_ms) * rms_upper_bound_factor(self._day_n))
         rate = self.rate_m_sqrt_s()
         if rate is None:
             return None

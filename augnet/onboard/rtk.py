@@ -204,7 +204,8 @@ class RtkOptions:
     iono_sigma_m: float | None = setting(None, unit="m", doc="prior sigma of the SD vertical ionosphere; None: "
                                          "vrs_iono_sigma_m for a VRS, else by iono_prior")
     iono_prior: str = setting("per_km", doc="a physical base's SD ionosphere prior: per_km (2 mm per km of "
-                              "baseline), learned (from the SD geometry-free phase's rate, once known; "
+                              "baseline), learned (per_km raised by the SD geometry-free phase's rate, then the "
+                              "day's level from fixed satellites, which may take the ionosphere out of the model; "
                               "ionosphere_prior.LearnedPrior)", choices=("per_km", "learned"),
                               source="docs/decisions/0162")
     vrs_iono_sigma_m: float = setting(0.02, unit="m", doc="prior sigma of the SD vertical ionosphere against a "
@@ -325,7 +326,7 @@ class RtkFilter:
         self.ion_seen: dict[str, float] = {}  # when each SD ionosphere state was last observed
         self.ion_prior_var: dict[str, float] = {}  # the prior variance each SD ionosphere state has [m^2]
         self._learned = ionosphere_prior.LearnedPrior()
-        self._iono_decided = False  # learned prior: the model chosen on the learned sigma (then sticky)
+        self._iono_stage = 0  # learned prior: the stage of learning the model was last chosen at
         self.iono_active = False
         self._iono_sigma_now = 0.0
         self.confirmation = FixConfirmation(self.opt.min_fix_ambiguities)
@@ -669,22 +670,25 @@ class RtkFilter:
         opt = self.opt
         sigma0 = ionosphere_prior.iono_sigma0(baseline_m, self.base_is_vrs, opt.iono_sigma_m, opt.vrs_iono_sigma_m)
         estimate = ionosphere_prior.estimate_ionosphere(opt.ionosphere, sigma0)
-        if opt.iono_prior == "learned" and opt.iono_sigma_m is None and not self.base_is_vrs and not self._iono_decided:
+        if opt.iono_prior == "learned" and opt.iono_sigma_m is None and not self.base_is_vrs:
+            # the per-km prior raised (never lowered) by the measured rate, then the day's level from fixed
+            # satellites (the centre's order, decisions 0102-0103); the model follows the per-km rule until the
+            # day's level is known, then that level
+            stage = self._learned.stage
             learned = self._learned.sigma0_m(baseline_m)
-            if learned is not None:
-                # the model chosen once on the learned prior; until then the per-km one, not committed to
+            if stage == 1:
+                sigma0 = max(sigma0, learned)
+            elif stage == 2:
                 sigma0 = learned
                 estimate = ionosphere_prior.estimate_ionosphere(opt.ionosphere, sigma0)
-                self._iono_decided = True
-            if not estimate and self.iono_active:
-                for sat in list(self.ion_seen):
-                    self._drop_ion(sat)
-                self.confirmation.reset()
-                self.iono_active = False
-        elif opt.iono_prior == "learned" and self._iono_decided and opt.iono_sigma_m is None and not self.base_is_vrs:
-            learned = self._learned.sigma0_m(baseline_m)
-            sigma0 = learned if learned is not None else sigma0
-            estimate = ionosphere_prior.estimate_ionosphere(opt.ionosphere, sigma0)
+            # the model is chosen again at each new stage of learning (the per-km prior is not committed to)
+            if stage > self._iono_stage:
+                self._iono_stage = stage
+                if not estimate and self.iono_active:
+                    for sat in list(self.ion_seen):
+                        self._drop_ion(sat)
+                    self.confirmation.reset()
+                    self.iono_active = False
         if estimate:
             self.iono_active = True
         self._iono_sigma_now = sigma0
@@ -989,6 +993,11 @@ class RtkFilter:
         need = self._confirm_needed()
         if count >= need:
             self._accept_fix(sol, attempt, n_all)
+            if self.opt.iono_prior == "learned" and dd.ion is not None:
+                r = rows[dd.f[rows] == 0]
+                el = ep.zd_base.el
+                m = np.hypot(ionosphere_prior.mapping(el[dd.k[r]]), ionosphere_prior.mapping(el[dd.ref[r]]))
+                self._learned.learn_fixed(ep.t, (attempt.x[dd.ion[r]] - attempt.x[dd.ion_ref[r]]) / m)
             keys = [(ep.sats[dd.k[r]], ep.sats[dd.ref[r]], int(dd.f[r])) for r in rows]
             sol.fixed_dd = FixedIntegers.determined(keys, attempt.x, attempt.P, dd.i[rows], dd.iref[rows])
         else:
