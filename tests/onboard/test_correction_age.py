@@ -97,3 +97,17 @@ def test_gpst_times_and_windows():
     data = ObsArrays(times, ["G01"], {"C1C": np.arange(5.0)[:, None]}, {"L1C": np.zeros((5, 1), int)})
     w = time_window(data, t + 1.0, t + 3.0)
     assert list(w.times - t) == [1.0, 2.0] and list(w.obs["C1C"][:, 0]) == [1.0, 2.0]
+
+
+def test_the_days_level_from_fixed_satellites_replaces_the_rate():
+    lp = _learned(1e-3)  # an active rate: a wide prior
+    assert lp.stage == 1 and lp.sigma0_m(20_000.0) > 0.1
+    lp.learn_fixed(1200.0, np.array([0.004, -0.003, 0.005, 0.002]))  # 4 satellites within half a centimetre
+    assert lp.stage == 2
+    floor = ip.LEARNED_FLOOR_PPM * 1e-6 * 20_000.0
+    assert lp.sigma0_m(20_000.0) == pytest.approx(floor)  # 1.2 x upper bound of a 3.7 mm RMS is under the floor
+    lp.learn_fixed(1500.0, np.array([0.03, -0.04, 0.035, 0.02]))  # a livelier day, a full time constant later
+    assert lp.sigma0_m(20_000.0) > 0.04
+    lp3 = ip.LearnedPrior()
+    lp3.learn_fixed(0.0, np.array([0.01, 0.01, 0.01]))  # too few satellites
+    assert lp3.stage == 0
