@@ -64,35 +64,20 @@ def process_variance(sigma0: float, dt_s: float) -> float:
 
 
 # --- the learned prior (`RtkOptions.iono_prior = "learned"`) -------------------------------------------
-# How fast the SD ionosphere moves, from the SD (rover - base) geometry-free phase at simultaneous epochs:
-# per satellite, increments over one interval and over at least LEARN_LAG_S (and three intervals); for white
-# phase noise s and a random walk of rate q, E[d^2] = 2 s^2 + q dt, so the two mean squares give q whatever
-# the interval (the centre's estimator, augnet/centre/ionosphere_prior.py IonosphereActivity).
-LEARN_LAG_S = 90.0
-# Increments over the lag needed before the learned rate counts (a 30 s base, 8 satellites: ~3 minutes).
-LEARN_MIN_SAMPLES = 40
-# Exponential smoothing of the increments' mean squares [epochs of the base].
-LEARN_TAU_EPOCHS = 30.0
-# The prior sigma0 is this times the rate [ppm of the baseline per ppm/sqrt(s)]: the centre's figure fitted on
-# the simulator's quiet to storm levels (decision 0103, iono_activity_ppm_per_rate).
-LEARNED_PPM_PER_RATE = 150.0
-# ... and never below this [ppm of the baseline, vertical]: the centre's floor of a day's level (decision 0102).
-LEARNED_FLOOR_PPM = 0.7
-PPM = 1.0e-6
-# A vertical SD geometry-free step beyond this [m, in units of the first frequency's delay] is a slip the
-# detectors missed (a reference receiver's unflagged phase reset, decision 0150), not ionosphere: the arc restarts.
-LEARN_SLIP_M = 0.3
-# A state's prior is tightened to the learned one only when that is this much tighter (the centre's share).
-PRIOR_TIGHTER_SHARE = 0.9
-
-
-# The day's level, once satellites are fixed: this times the one-sided 95 % upper bound of the RMS of the fixed
-# satellites' vertical SD ionosphere (the centre's iono_prior_adapt, decision 0102), over a running mean square
-# with this time constant [s], from at least DAY_MIN_SATS satellites.
+# The day's level, once satellites are fixed with the ionosphere in the model: DAY_ADAPT times the one-sided
+# 95 % upper bound of the RMS of their vertical SD ionosphere (the centre's iono_prior_adapt, decision 0102),
+# over a running mean square with time constant DAY_TAU_S [s], from at least DAY_MIN_SATS satellites, never
+# below LEARNED_FLOOR_PPM of the baseline (the centre's floor of a day's level).  Until then the per-km prior.
+# (The SD geometry-free phase's rate, the centre's first stage, was measured and left out: on catnet's 30 s
+# data multipath reads as ionosphere, 7-9 cm at 20 km on a quiet night: docs/decisions/0162.)
 DAY_ADAPT = 1.2
 DAY_TAU_S = 300.0
 DAY_MIN_SATS = 4
 UPPER_BOUND_Z = 1.645
+LEARNED_FLOOR_PPM = 0.7
+PPM = 1.0e-6
+# A state's prior is tightened to the learned one only when that is this much tighter (the centre's share).
+PRIOR_TIGHTER_SHARE = 0.9
 
 
 def rms_upper_bound_factor(n: int, z: float = UPPER_BOUND_Z) -> float:
@@ -103,24 +88,16 @@ def rms_upper_bound_factor(n: int, z: float = UPPER_BOUND_Z) -> float:
 
 
 class LearnedPrior:
-    """The SD vertical ionosphere prior learned from the data, in two stages: LEARNED_PPM_PER_RATE times the
-    measured rate of the SD geometry-free phase (once LEARN_MIN_SAMPLES long increments), then, once satellites
-    are fixed with the ionosphere in the model, the day's level from their estimated DD ionosphere."""
+    """The SD vertical ionosphere prior learned from the fixed satellites' estimated DD ionosphere."""
 
     def __init__(self):
-        self._hist: dict[str, list[tuple[float, float]]] = {}  # sat -> (t, slant SD GF in units of I1 [m])
-        self._means: np.ndarray | None = None  # mean squares and spans: short [m^2, s], long [m^2, s]
-        self._samples = 0
         self._day_ms: float | None = None  # running mean square of the fixed satellites' vertical SD ionosphere
         self._day_n = 0
         self._day_t = math.nan
 
     @property
-    def stage(self) -> int:
-        """0: nothing learned, 1: the rate, 2: the day's level."""
-        if self._day_ms is not None:
-            return 2
-        return 1 if self.rate_m_sqrt_s() is not None else 0
+    def known(self) -> bool:
+        return self._day_ms is not None
 
     def learn_fixed(self, t: float, sd_vertical_m: np.ndarray) -> None:
         """A declared fix's satellites' SD vertical ionosphere [m] (DD over sqrt(M_k^2 + M_ref^2))."""
@@ -134,56 +111,9 @@ class LearnedPrior:
             self._day_ms += min(1.0, max(t - self._day_t, 0.0) / DAY_TAU_S) * (ms - self._day_ms)
         self._day_n, self._day_t = q.size, t
 
-    def observe(self, t: float, sats, sd_gf_m: np.ndarray, gamma_minus_1: np.ndarray, el_rad: np.ndarray,
-                restarted) -> None:
-        """One simultaneous epoch: SD geometry-free phase lambda1 phi1 - lambda2 phi2 [m] per satellite (NaN
-        without), (f1/f2)^2 - 1, the elevations, and the satellites whose arc restarted (a slip)."""
-        # slant, in units of the first frequency's delay; increments scaled to vertical (the arc's constant
-        # ambiguity would not survive the mapping)
-        slant = sd_gf_m / gamma_minus_1
-        to_vert = 1.0 / mapping(el_rad)
-        short, long_ = [], []
-        for k, s in enumerate(sats):
-            if s in restarted:
-                self._hist.pop(s, None)
-            if not np.isfinite(slant[k]) or not np.isfinite(to_vert[k]):
-                continue
-            h = self._hist.setdefault(s, [])
-            if h and abs(slant[k] - h[-1][1]) * to_vert[k] > LEARN_SLIP_M:
-                h.clear()
-            if h:
-                dt = t - h[-1][0]
-                short.append((((slant[k] - h[-1][1]) * to_vert[k]) ** 2, dt))
-                span = max(LEARN_LAG_S, 3.0 * dt)
-                old = next((p for p in reversed(h) if t - p[0] >= span - 1e-6), None)
-                if old is not None:
-                    long_.append((((slant[k] - old[1]) * to_vert[k]) ** 2, t - old[0]))
-                while len(h) > 1 and t - h[1][0] >= span - 1e-6:
-                    h.pop(0)
-            h.append((t, float(slant[k])))
-        if not short or not long_:
-            return
-        now = np.array([np.mean([d for d, _ in short]), np.mean([d for _, d in short]),
-                        np.mean([d for d, _ in long_]), np.mean([d for _, d in long_])])
-        self._means = now if self._means is None else self._means + (now - self._means) / LEARN_TAU_EPOCHS
-        self._samples += len(long_)
-
-    def rate_m_sqrt_s(self) -> float | None:
-        """The SD vertical ionosphere's random-walk rate [m/sqrt(s)], None until learned."""
-        if self._means is None or self._samples < LEARN_MIN_SAMPLES:
-            return None
-        ms_short, dt_short, ms_long, dt_long = self._means
-        if not dt_long > dt_short:
-            return None
-        return math.sqrt(max(ms_long - ms_short, 0.0) / (dt_long - dt_short))
-
     def sigma0_m(self, baseline_m: float) -> float | None:
-        """The learned prior sigma [m] of the SD vertical ionosphere on the first frequency, None until learned."""
-        floor = LEARNED_FLOOR_PPM * PPM * baseline_m
-        if self._day_ms is not None:
-            return max(floor, DAY_ADAPT * math.sqrt(self._day_ms) * rms_upper_bound_factor(self._day_n))
-        rate = self.rate_m_sqrt_s()
-        if rate is None:
+        """The learned prior sigma [m] of the SD vertical ionosphere on the first frequency, None until known."""
+        if self._day_ms is None:
             return None
-        rate_ppm = rate / (PPM * baseline_m)
-        return max(LEARNED_FLOOR_PPM, LEARNED_PPM_PER_RATE * rate_ppm) * PPM * baseline_m
+        return max(LEARNED_FLOOR_PPM * PPM * baseline_m,
+                   DAY_ADAPT * math.sqrt(self._day_ms) * rms_upper_bound_factor(self._day_n))

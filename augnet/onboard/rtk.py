@@ -204,8 +204,8 @@ class RtkOptions:
     iono_sigma_m: float | None = setting(None, unit="m", doc="prior sigma of the SD vertical ionosphere; None: "
                                          "vrs_iono_sigma_m for a VRS, else by iono_prior")
     iono_prior: str = setting("per_km", doc="a physical base's SD ionosphere prior: per_km (2 mm per km of "
-                              "baseline), learned (per_km raised by the SD geometry-free phase's rate, then the "
-                              "day's level from fixed satellites, which may take the ionosphere out of the model; "
+                              "baseline), learned (per_km until fixes, then the day's level from the fixed "
+                              "satellites' DD ionosphere, which may take the ionosphere out of the model; "
                               "ionosphere_prior.LearnedPrior)", choices=("per_km", "learned"),
                               source="docs/decisions/0162")
     vrs_iono_sigma_m: float = setting(0.02, unit="m", doc="prior sigma of the SD vertical ionosphere against a "
@@ -326,7 +326,6 @@ class RtkFilter:
         self.ion_seen: dict[str, float] = {}  # when each SD ionosphere state was last observed
         self.ion_prior_var: dict[str, float] = {}  # the prior variance each SD ionosphere state has [m^2]
         self._learned = ionosphere_prior.LearnedPrior()
-        self._iono_stage = 0  # learned prior: the stage of learning the model was last chosen at
         self.iono_active = False
         self._iono_sigma_now = 0.0
         self.confirmation = FixConfirmation(self.opt.min_fix_ambiguities)
@@ -557,8 +556,6 @@ class RtkFilter:
         if ep is None:
             return self._single(t, spp, "no satellites common to rover and base", age)
         self._age_var = correction_age.sd_variance_m2(age, len(ep.sats)) if opt.age_variance else None
-        if opt.iono_prior == "learned" and ep.nf >= 2 and abs(age) < correction_age.MIN_AGE_S:
-            self._learn_ionosphere(ep)
         self._restart_slipped(ep)
         self._expire_states(t)
         # linearisation point: the state's position, or for a white-noise position (kinematic without
@@ -670,36 +667,20 @@ class RtkFilter:
         opt = self.opt
         sigma0 = ionosphere_prior.iono_sigma0(baseline_m, self.base_is_vrs, opt.iono_sigma_m, opt.vrs_iono_sigma_m)
         estimate = ionosphere_prior.estimate_ionosphere(opt.ionosphere, sigma0)
-        if opt.iono_prior == "learned" and opt.iono_sigma_m is None and not self.base_is_vrs:
-            # the per-km prior raised (never lowered) by the measured rate, then the day's level from fixed
-            # satellites (the centre's order, decisions 0102-0103); the model follows the per-km rule until the
-            # day's level is known, then that level
-            stage = self._learned.stage
-            learned = self._learned.sigma0_m(baseline_m)
-            if stage == 1:
-                sigma0 = max(sigma0, learned)
-            elif stage == 2:
-                sigma0 = learned
-                estimate = ionosphere_prior.estimate_ionosphere(opt.ionosphere, sigma0)
-            # the model is chosen again at each new stage of learning (the per-km prior is not committed to)
-            if stage > self._iono_stage:
-                self._iono_stage = stage
-                if not estimate and self.iono_active:
-                    for sat in list(self.ion_seen):
-                        self._drop_ion(sat)
-                    self.confirmation.reset()
-                    self.iono_active = False
+        if opt.iono_prior == "learned" and opt.iono_sigma_m is None and not self.base_is_vrs and self._learned.known:
+            # the day's level from fixed satellites (the per-km prior until then), which takes the ionosphere out
+            # of the model whenever it allows (one way: without it nothing more is learned)
+            sigma0 = self._learned.sigma0_m(baseline_m)
+            estimate = ionosphere_prior.estimate_ionosphere(opt.ionosphere, sigma0)
+            if not estimate and self.iono_active:
+                for sat in list(self.ion_seen):
+                    self._drop_ion(sat)
+                self.confirmation.reset()
+                self.iono_active = False
         if estimate:
             self.iono_active = True
         self._iono_sigma_now = sigma0
         return sigma0
-
-    def _learn_ionosphere(self, ep: _CommonEpoch) -> None:
-        """Feed the learned prior this simultaneous epoch's SD geometry-free phases."""
-        gf = lambda o: o.phase_cyc[:, 0] * ep.wl[:, 0] - o.phase_cyc[:, 1] * ep.wl[:, 1]  # noqa: E731
-        sd_gf = np.where(ep.same_wl.all(axis=1), gf(ep.rover) - gf(ep.base), np.nan)
-        restarted = {s for s, slip in zip(ep.sats, ep.slips.any(axis=1)) if slip}
-        self._learned.observe(ep.t, ep.sats, sd_gf, ep.mu[:, 1] - 1.0, ep.zd_base.el, restarted)
 
     def _tighten_ionosphere(self, sigma0: float, el: np.ndarray, sats: list[str]) -> None:
         """SD ionosphere states whose prior is wider than the learned one get a zero pseudo-observation making

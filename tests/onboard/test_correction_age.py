@@ -54,40 +54,6 @@ def test_a_30s_base_keeps_its_arcs_and_a_missed_epoch_breaks_them():
     assert rover.detect(_epoch(30.0, ph)).all()
 
 
-def _learned(rate_m_sqrt_s, seed=1, n_epochs=40, dt=30.0, noise_m=0.003):
-    rng = np.random.default_rng(seed)
-    lp = ip.LearnedPrior()
-    n = 8
-    walk = np.zeros(n)
-    el = np.full(n, np.pi / 2)
-    for e in range(n_epochs):
-        walk += rng.normal(0.0, rate_m_sqrt_s * np.sqrt(dt), n)
-        gm1 = np.full(n, 0.6469)
-        gf = 5.0 + gm1 * walk + rng.normal(0.0, noise_m, n)
-        lp.observe(e * dt, [f"G{i:02d}" for i in range(n)], gf, gm1, el, set())
-    return lp
-
-
-def test_the_learned_prior_is_tight_on_a_quiet_ionosphere_and_wide_on_an_active_one():
-    assert ip.LearnedPrior().sigma0_m(20_000.0) is None  # nothing learned yet
-    quiet = _learned(1e-5).sigma0_m(20_000.0)
-    active = _learned(1e-3).sigma0_m(20_000.0)
-    # quiet: at the floor (1.4 cm at 20 km) or the phase noise's leftover just above it
-    assert ip.LEARNED_FLOOR_PPM * 1e-6 * 20_000.0 <= quiet < 0.02 and quiet < active / 5.0
-    assert active == pytest.approx(ip.LEARNED_PPM_PER_RATE * 1e-3, rel=0.35)
-    assert ip.estimate_ionosphere("auto", active)
-
-
-def test_the_learned_prior_restarts_an_arc_on_a_step_rather_than_learn_it():
-    lp = _learned(1e-5, n_epochs=20)
-    sats = [f"G{i:02d}" for i in range(8)]
-    gm1, el = np.full(8, 0.6469), np.full(8, np.pi / 2)
-    lp.observe(20 * 30.0, sats, np.full(8, 5.0 + 20.0), gm1, el, set())  # a 20 m phase reset on every satellite
-    for e in range(21, 30):
-        lp.observe(e * 30.0, sats, np.full(8, 25.0), gm1, el, set())
-    assert lp.sigma0_m(20_000.0) < 0.02  # a step of 20 m would have read as a storm
-
-
 def test_gpst_times_and_windows():
     t = parse_gpst("2010-03-18T05:00:00")
     assert parse_gpst("2010/03/18 05:00:30") == pytest.approx(t + 30.0)
@@ -99,15 +65,17 @@ def test_gpst_times_and_windows():
     assert list(w.times - t) == [1.0, 2.0] and list(w.obs["C1C"][:, 0]) == [1.0, 2.0]
 
 
-def test_the_days_level_from_fixed_satellites_replaces_the_rate():
-    lp = _learned(1e-3)  # an active rate: a wide prior
-    assert lp.stage == 1 and lp.sigma0_m(20_000.0) > 0.1
+def test_the_days_level_from_fixed_satellites():
+    lp = ip.LearnedPrior()
+    assert not lp.known and lp.sigma0_m(20_000.0) is None  # the per-km prior until satellites are fixed
     lp.learn_fixed(1200.0, np.array([0.004, -0.003, 0.005, 0.002]))  # 4 satellites within half a centimetre
-    assert lp.stage == 2
+    assert lp.known
     floor = ip.LEARNED_FLOOR_PPM * 1e-6 * 20_000.0
-    assert lp.sigma0_m(20_000.0) == pytest.approx(floor)  # 1.2 x upper bound of a 3.7 mm RMS is under the floor
+    assert lp.sigma0_m(20_000.0) == pytest.approx(floor)  # 1.2 x the upper bound of a 3.7 mm RMS: under the floor
+    assert not ip.estimate_ionosphere("auto", lp.sigma0_m(20_000.0))  # a quiet night: out of the model at 20 km
     lp.learn_fixed(1500.0, np.array([0.03, -0.04, 0.035, 0.02]))  # a livelier day, a full time constant later
-    assert lp.sigma0_m(20_000.0) > 0.04
-    lp3 = ip.LearnedPrior()
-    lp3.learn_fixed(0.0, np.array([0.01, 0.01, 0.01]))  # too few satellites
-    assert lp3.stage == 0
+    assert lp.sigma0_m(20_000.0) == pytest.approx(1.2 * 0.03211 * ip.rms_upper_bound_factor(4), rel=1e-3)
+    assert ip.estimate_ionosphere("auto", lp.sigma0_m(20_000.0))
+    few = ip.LearnedPrior()
+    few.learn_fixed(0.0, np.array([0.01, 0.01, 0.01]))  # too few satellites
+    assert not few.known
