@@ -203,7 +203,7 @@ class RtkOptions:
                               "estimate (always), off (short-baseline model)", choices=("auto", "estimate", "off"))
     iono_sigma_m: float | None = setting(None, unit="m", doc="prior sigma of the SD vertical ionosphere; None: "
                                          "vrs_iono_sigma_m for a VRS, else by iono_prior")
-    iono_prior: str = setting("per_km", doc="a physical base's SD ionosphere prior: per_km (2 mm per km of "
+    iono_prior: str = setting("learned", doc="a physical base's SD ionosphere prior: per_km (2 mm per km of "
                               "baseline), learned (per_km until fixes, then the day's level from the fixed "
                               "satellites' DD ionosphere, which may take the ionosphere out of the model; "
                               "ionosphere_prior.LearnedPrior)", choices=("per_km", "learned"),

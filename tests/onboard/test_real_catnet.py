@@ -8,9 +8,10 @@ UPC1's header antenna height is 0, so both report UPC1's ARP, which the truth is
 
 Span: 05:00-05:20 GPST (1,200 rover epochs, 40 base epochs, every age 0-29 s 40 times).  Over 05:00-06:00
 (docs/decisions/0162) the 20-minute thirds gave ours 7/4/16 and RTKLIB 7/2/17 fixes beyond 10 cm, every one at
-an age of 20-29 s: the first third has the hour's mix.  Ours runs with the ionosphere out of the model and the
-hydrostatic troposphere (the measured best on this baseline; the defaults lose 3 % of the fixes and triple the
-errors beyond 10 cm).
+an age of 20-29 s: the first third has the hour's mix.  Ours runs with the troposphere of the truth (hydrostatic,
+`tropo_humidity=0`; our 70 % default sits 4.6 cm lower, where a troposphere-estimated static solution puts UPC1),
+once with the ionosphere out of the model (fixing as often as RTKLIB) and once as the default handles it
+(`iono_prior=learned`: out of the model once the first fixes show a quiet night).
 """
 
 from __future__ import annotations
@@ -32,6 +33,9 @@ UPC1_TRUTH = np.array([4789013.1051, 176610.1545, 4195034.8712])
 START, END = "2010-03-18T05:00:00", "2010-03-18T05:20:00"
 OURS = ["--systems", "G", "--frequencies", "2", "--elevation-mask", "15", "--max-age", "30",
         "--opt", "ionosphere=off", "--opt", "tropo_humidity=0"]
+# ... and with the ionosphere as the default handles it (iono_prior=learned: in the model until the first fixes
+# show the night's DD ionosphere, ~0.5 cm, then out).
+OURS_LEARNED = [*OURS[:8], "--opt", "tropo_humidity=0"]
 RTKLIB_CONF = """\
 pos1-posmode       =kinematic
 pos1-frequency     =l1+2
@@ -87,19 +91,25 @@ def runs(shared_data, tmp_path_factory):
     from augnet.cli import _mount, app
 
     _mount()
-    out = tmp / "ours.csv"
-    r = CliRunner().invoke(app, ["rtk", "--rover", str(files["UPC10770.10o"]), "--base", str(files["GARR0770.10o"]),
-                                 "--nav", str(files["brdc0770.10n"]), "--base-pos", ",".join(f"{v:.4f}" for v in base),
-                                 "--start", START, "--end", END, "--out", str(out), *OURS])
-    assert r.exit_code == 0, r.output
-    ours = _read_csv(out)
+
+    def ours(args):
+        out = tmp / "ours.csv"
+        r = CliRunner().invoke(app, ["rtk", "--rover", str(files["UPC10770.10o"]), "--base", str(files["GARR0770.10o"]),
+                                     "--nav", str(files["brdc0770.10n"]), "--base-pos",
+                                     ",".join(f"{v:.4f}" for v in base), "--start", START, "--end", END,
+                                     "--out", str(out), *args])
+        assert r.exit_code == 0, r.output
+        rows = _read_csv(out)
+        return rows, [[float(row[k]) for k in ("x_m", "y_m", "z_m")] for row in rows if row["status"] == "fix"]
 
     def errors(xyz):
         return np.linalg.norm(ecef_to_enu(np.asarray(xyz) - UPC1_TRUTH, UPC1_TRUTH), axis=-1)
 
-    o_fix = [[float(row[k]) for k in ("x_m", "y_m", "z_m")] for row in ours if row["status"] == "fix"]
+    rows, o_fix = ours(OURS)
+    rows_l, l_fix = ours(OURS_LEARNED)
     t_fix = [p for p, q in theirs.values() if q == 1]
-    res = {"ours": (len(ours), len(o_fix), errors(o_fix)), "rtklib": (len(theirs), len(t_fix), errors(t_fix))}
+    res = {"ours": (len(rows), len(o_fix), errors(o_fix)), "learned": (len(rows_l), len(l_fix), errors(l_fix)),
+           "rtklib": (len(theirs), len(t_fix), errors(t_fix))}
     for k, (n, nf, e) in res.items():
         print(f"{k}: {nf}/{n} fixed, {int(np.sum(e > MAX_FIX_ERROR_M))} beyond 10 cm, "
               f"median {np.median(e) * 100:.1f} cm")
@@ -121,3 +131,12 @@ def test_fixes_at_least_as_often_as_rtklib_and_no_more_errors_beyond_10cm(runs):
 def test_no_fix_beyond_10cm(runs):
     _, n_fix, err = runs["ours"]
     assert n_fix > 0 and np.sum(err > MAX_FIX_ERROR_M) == 0
+
+
+def test_the_learned_ionosphere_prior_fixes_most_epochs_with_no_more_errors_beyond_10cm(runs):
+    """Measured 1,078 of 1,200 fixed (the first two minutes float while the prior is the per-km one), 7 beyond
+    10 cm; the per-km prior kept over the hour: 82 beyond 10 cm against 27 (docs/decisions/0162)."""
+    n, n_fix, err = runs["learned"]
+    _, _, err_t = runs["rtklib"]
+    assert n == 1200 and n_fix >= 0.85 * n
+    assert np.sum(err > MAX_FIX_ERROR_M) <= np.sum(err_t > MAX_FIX_ERROR_M)
