@@ -12,8 +12,9 @@ changes without touching the state.
 Atmosphere.  The troposphere model is applied at each receiver.  On a short baseline the DD ionosphere
 is millimetres and is not modelled: the filter fixes from the first epoch.  Against a network VRS
 (RINEX MARKER TYPE NON_PHYSICAL, RTCM DF141 = 1) or a longer baseline the filter is
-*ionosphere-weighted* (`ionosphere_prior.py`) and code is weighted down, since the base's multipath is
-correlated over minutes.  No relative zenith troposphere state: over a minute it cannot be told from the
+*ionosphere-weighted* (`ionosphere_prior.py`; against a physical base its prior is learned from the fixed
+satellites) and code is weighted down, since the base's multipath is correlated over minutes.  Aged
+corrections (a 30 s base) add a per-satellite error to the DD covariance (`correction_age.py`).  No relative zenith troposphere state: over a minute it cannot be told from the
 height (docs/decisions/0080-rtk-model-and-validation.md).
 
 Validation (`_resolve`).  Partial fixing under one `FixPolicy` (`augnet.gnss.ambiguity`), a fixed
@@ -663,7 +664,8 @@ class RtkFilter:
 
     def _switch_ionosphere(self, baseline_m: float) -> float:
         """The SD ionosphere's prior sigma0 [m] this epoch; the ionosphere enters the model for a VRS or a
-        baseline long enough to need it, and then stays."""
+        baseline long enough to need it, and then stays -- unless the learned prior (`iono_prior=learned`) shows
+        the day's level too small to matter."""
         opt = self.opt
         sigma0 = ionosphere_prior.iono_sigma0(baseline_m, self.base_is_vrs, opt.iono_sigma_m, opt.vrs_iono_sigma_m)
         estimate = ionosphere_prior.estimate_ionosphere(opt.ionosphere, sigma0)
