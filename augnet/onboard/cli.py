@@ -43,9 +43,14 @@ def rtk(
                                               "then the markers'")] = None,
     opt_assignments: Annotated[list[str] | None, typer.Option("--opt", help="NAME=VALUE: any RTK setting "
                                                               "(docs/options/rtk.md); repeatable")] = None,
+    start: Annotated[str | None, typer.Option("--start", help="first rover epoch, GPST 'YYYY-MM-DDTHH:MM:SS' "
+                                              "(rnx2rtkp -ts)")] = None,
+    end: Annotated[str | None, typer.Option("--end", help="rover epochs before this, GPST 'YYYY-MM-DDTHH:MM:SS' "
+                                            "(rnx2rtkp -te)")] = None,
 ) -> None:
     """Post-process RTK: rover + base RINEX -> solution CSV (time, ECEF, geodetic, status, ratio, sigmas)."""
-    from augnet.onboard.inputs import InputError, antenna_setup, load_nav, load_obs, parse_position
+    from augnet.onboard.inputs import (InputError, antenna_setup, load_nav, load_obs, parse_gpst, parse_position,
+                                       time_window)
     from augnet.onboard.postprocess import process
     from augnet.onboard.rtk import RtkOptions
     from augnet.onboard.solution import write_csv
@@ -76,6 +81,12 @@ def rtk(
         opt.spp.klobuchar_alpha, opt.spp.klobuchar_beta = alpha, beta
         rov = load_obs(rover)
         bas = load_obs(base)
+        if start is not None or end is not None:
+            t0 = parse_gpst(start) if start is not None else -math.inf
+            t1 = parse_gpst(end) if end is not None else math.inf
+            rov = time_window(rov, t0, t1)
+            # the base epoch in force at the first rover epoch is the latest before it
+            bas = time_window(bas, t0 - opt.max_age_s - 1.0, t1)
         if base_pos.strip().lower() == "header":
             bp = bas.approx_position_m
             if bp is None or not 6.0e6 < float((bp**2).sum()) ** 0.5 < 7.0e6:

@@ -33,6 +33,10 @@ DOPPLER_SLIP_THRESHOLD_CYC = 5.0
 DOPPLER_DRIFT_CYC_S = 1.0
 # Longer gaps than this [s] break the arc: integer ambiguities are not carried across.
 MAX_ARC_GAP_S = 10.0
+# ... of a base: a network reference station records at 30 s (IGS, EUREF, catnet), so its arc continues
+# across one interval (its GF test then allows 2.5 cm + 30 s x 5 mm/s); a missed epoch (60 s) breaks it.
+# (10 s reset every base ambiguity at each new 30 s epoch: docs/decisions/0162.)
+BASE_MAX_ARC_GAP_S = 35.0
 
 
 class SlipDetector:

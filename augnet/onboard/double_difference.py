@@ -14,7 +14,8 @@ import numpy as np
 
 from augnet.gnss.antex import AntennaSetup
 from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
-from augnet.onboard.atmosphere import saastamoinen_m
+from augnet.onboard import correction_age
+from augnet.onboard.atmosphere import DEFAULT_RELATIVE_HUMIDITY, saastamoinen_m
 from augnet.onboard.observations import BAND_FREQ_HZ, SYSTEM_BANDS, EpochObs
 from augnet.onboard.spp import SatPositions, azimuth_elevation_from, geometric_range, receiver_frame
 
@@ -91,14 +92,16 @@ def first_wavelength(system: str) -> float:
 
 
 def zero_differences(obs: EpochObs, rx_m: np.ndarray, sp: SatPositions,
-                     antenna: AntennaSetup | None = None) -> ZeroDifferences:
-    """Observed minus modelled phase and code of one receiver at position rx_m. With `antenna` (its ANTEX
-    calibration and ARP offset), the observations first get its phase-centre correction, so rx_m is the
-    receiver's marker (`augnet.gnss.antex.AntennaSetup`)."""
+                     antenna: AntennaSetup | None = None,
+                     humidity: float = DEFAULT_RELATIVE_HUMIDITY) -> ZeroDifferences:
+    """Observed minus modelled phase and code of one receiver at position rx_m (Saastamoinen's troposphere
+    with relative humidity `humidity`; 0: its hydrostatic part only). With `antenna` (its ANTEX calibration and
+    ARP offset), the observations first get its phase-centre correction, so rx_m is the receiver's marker
+    (`augnet.gnss.antex.AntennaSetup`)."""
     rng, los = geometric_range(np.where(sp.valid[:, None], sp.position_m, rx_m + 1.0), rx_m)
     llh, rot = receiver_frame(rx_m)
     az, el = azimuth_elevation_from(rx_m, rot, np.where(sp.valid[:, None], sp.position_m, rx_m + np.array([0, 0, 1.0])))
-    trop = saastamoinen_m(llh[0], llh[2], el)
+    trop = saastamoinen_m(llh[0], llh[2], el, humidity)
     model = rng + trop - SPEED_OF_LIGHT_M_S * sp.clock_s
     phase = obs.phase_cyc * obs.wavelength_m - model[:, None]
     code = obs.code_m - model[:, None]
@@ -165,12 +168,13 @@ def dd_index(groups: list[Group], amb_state, ion_state=None) -> DDIndex:
 
 
 def dd_rows(dd: DDIndex, sd: SingleDifferences, wl: np.ndarray, mu: np.ndarray, var_sd: np.ndarray,
-            x: np.ndarray, code_phase_ratio: float) -> Rows:
+            x: np.ndarray, code_phase_ratio: float, var_common: np.ndarray | None = None) -> Rows:
     """Innovations, design matrix and covariance of the epoch's DD phase rows then DD code rows, for the
     state x with the SDs formed at the linearisation point (so the innovations carry no position term).
 
     wl: wavelengths [m] per satellite and slot; mu: the ionosphere's scale (f1 / f)^2; var_sd: SD phase
-    variances [m^2]; code variances are those times code_phase_ratio^2."""
+    variances [m^2]; code variances are those times code_phase_ratio^2; var_common: per satellite, the
+    variance [m^2] of an SD error common to its slots, phase and code (aged corrections: `correction_age`)."""
     nx = len(x)
     m = len(dd.k)
     ar = np.arange(m)
@@ -194,6 +198,9 @@ def dd_rows(dd: DDIndex, sd: SingleDifferences, wl: np.ndarray, mu: np.ndarray, 
     R = np.zeros((2 * m, 2 * m))
     R[:m, :m] = Rp
     R[m:, m:] = Rp * code_phase_ratio**2
+    if var_common is not None and np.any(var_common > 0.0):
+        A = correction_age.dd_covariance(k, ref, var_common)
+        R += np.block([[A, A], [A, A]])
     kind = np.concatenate((np.ones(m, dtype=int), np.zeros(m, dtype=int)))
     return Rows(v, H, R, kind)
 

@@ -129,3 +129,25 @@ def parse_position(text: str) -> np.ndarray:
     if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 360.0):
         raise InputError(f"position {text!r}: latitude/longitude out of range")
     return np.asarray(geodetic_deg_to_ecef(lat, lon, h), dtype=float)
+
+
+def parse_gpst(text: str) -> float:
+    """'YYYY-MM-DDTHH:MM:SS[.s]' (or with a space or '/' separators, as rnx2rtkp writes) in GPS time -> GPST
+    seconds."""
+    from augnet.gnss import time as gtime
+
+    t = text.strip().replace("/", "-").replace(" ", "T")
+    try:
+        day, clock = t.split("T")
+        y, mo, d = (int(v) for v in day.split("-"))
+        hh, mm, ss = clock.split(":")
+        return float(gtime.from_calendar(y, mo, d, int(hh), int(mm), float(ss)))
+    except ValueError:
+        raise InputError(f"time {text!r}: expected YYYY-MM-DDTHH:MM:SS (GPST)") from None
+
+
+def time_window(data: ObsArrays, t0: float, t1: float) -> ObsArrays:
+    """The epochs t0 <= t < t1 of `data`."""
+    m = (data.times >= t0) & (data.times < t1)
+    return ObsArrays(data.times[m], data.sats, {k: v[m] for k, v in data.obs.items()},
+                     {k: v[m] for k, v in data.lli.items()}, data.approx_position_m, marker_type=data.marker_type)

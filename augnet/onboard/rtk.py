@@ -12,8 +12,9 @@ changes without touching the state.
 Atmosphere.  The troposphere model is applied at each receiver.  On a short baseline the DD ionosphere
 is millimetres and is not modelled: the filter fixes from the first epoch.  Against a network VRS
 (RINEX MARKER TYPE NON_PHYSICAL, RTCM DF141 = 1) or a longer baseline the filter is
-*ionosphere-weighted* (`ionosphere_prior.py`) and code is weighted down, since the base's multipath is
-correlated over minutes.  No relative zenith troposphere state: over a minute it cannot be told from the
+*ionosphere-weighted* (`ionosphere_prior.py`; against a physical base its prior is learned from the fixed
+satellites) and code is weighted down, since the base's multipath is correlated over minutes.  Aged
+corrections (a 30 s base) add a per-satellite error to the DD covariance (`correction_age.py`).  No relative zenith troposphere state: over a minute it cannot be told from the
 height (docs/decisions/0080-rtk-model-and-validation.md).
 
 Validation (`_resolve`).  Partial fixing under one `FixPolicy` (`augnet.gnss.ambiguity`), a fixed
@@ -49,8 +50,8 @@ from augnet.gnss.antex import AntennaSetup
 from augnet.gnss.ephemeris import NavigationData
 from augnet.gnss.fix_confirmation import FixConfirmation, IntegerDecision
 from augnet.gnss.state_layout import StateLayout
-from augnet.onboard import ionosphere_prior
-from augnet.onboard.cycleslip import BASE_GF_DRIFT_M_S, BASE_GF_SLIP_THRESHOLD_M, SlipDetector
+from augnet.onboard import correction_age, ionosphere_prior
+from augnet.onboard.cycleslip import BASE_GF_DRIFT_M_S, BASE_GF_SLIP_THRESHOLD_M, BASE_MAX_ARC_GAP_S, SlipDetector
 from augnet.onboard.double_difference import (
     AMB_KNOWN_SIGMA_CYC,
     DDIndex,
@@ -157,6 +158,9 @@ SPP_CONSISTENCY_M = 30.0
 MAX_FLOAT_COVARIANCE_TRACE_M2 = 1e6
 # Fixed solutions whose DD phase residuals exceed this [m] are rejected (wrong fix).
 MAX_FIXED_PHASE_RESIDUAL_M = 0.05
+# ... plus this many sigmas of the row's error from aged corrections (correction_age; 3: a 0.3 % false alarm
+# per row when the age dominates).
+AGE_RESIDUAL_SIGMAS = 3.0
 # With the ionosphere in the model, a validated fix is declared only when the same integers have been
 # found in this many consecutive epochs (a biased float can pass one epoch's tests by chance).
 CONFIRM_EPOCHS_WITH_IONOSPHERE = 3
@@ -200,12 +204,23 @@ class RtkOptions:
     ionosphere: str = setting("auto", doc="SD ionosphere per satellite: auto (for a VRS or beyond ~7 km), "
                               "estimate (always), off (short-baseline model)", choices=("auto", "estimate", "off"))
     iono_sigma_m: float | None = setting(None, unit="m", doc="prior sigma of the SD vertical ionosphere; None: "
-                                         "vrs_iono_sigma_m for a VRS, else 2 mm per km of baseline")
+                                         "vrs_iono_sigma_m for a VRS, else by iono_prior")
+    iono_prior: str = setting("learned", doc="a physical base's SD ionosphere prior: per_km (2 mm per km of "
+                              "baseline), learned (per_km until fixes, then the day's level from the fixed "
+                              "satellites' DD ionosphere, which may take the ionosphere out of the model; "
+                              "ionosphere_prior.LearnedPrior)", choices=("per_km", "learned"),
+                              source="docs/decisions/0162")
     vrs_iono_sigma_m: float = setting(0.02, unit="m", doc="prior sigma of the SD vertical ionosphere against a "
                                       "network VRS (the network's interpolation residual)",
                                       source="1-3 cm DD at 30-70 km spacing (network-rtk.md: Tang et al. 2016)")
     confirm_epochs: int | None = setting(None, doc="consecutive agreeing fixes before FIX; None: 1, or 3 with "
                                          "the ionosphere estimated")
+    age_variance: bool = setting(True, doc="inflate the DD covariance with the corrections' age (satellite clock "
+                                 "drift since the base epoch, common to a satellite's slots, code and phase)",
+                                 source="RTKLIB stats-clkstab; docs/decisions/0162")
+    tropo_humidity: float = setting(0.7, doc="relative humidity of the Saastamoinen troposphere at both "
+                                    "receivers; 0: hydrostatic part only (RTKLIB 2.4.3's relative-mode model)",
+                                    source="RTKLIB REL_HUMI 0.7; rtkpos.c zdres (hydrostatic)")
     accel_sigma_h: float = setting(3.0, unit="m/s^2/sqrt(s)", doc="dynamics: horizontal white-jerk process "
                                    "noise (a train brakes at ~1 m/s^2; a road vehicle changes faster)")
     accel_sigma_v: float = setting(1.0, unit="m/s^2/sqrt(s)", doc="dynamics: vertical white-jerk process noise")
@@ -317,6 +332,8 @@ class RtkFilter:
         self.amb_serial: dict[tuple[str, int], int] = {}
         self._serials = 0
         self.ion_seen: dict[str, float] = {}  # when each SD ionosphere state was last observed
+        self.ion_prior_var: dict[str, float] = {}  # the prior variance each SD ionosphere state has [m^2]
+        self._learned = ionosphere_prior.LearnedPrior()
         self.iono_active = False
         self._iono_sigma_now = 0.0
         self.confirmation = FixConfirmation(self.opt.min_fix_ambiguities)
@@ -326,7 +343,9 @@ class RtkFilter:
         self.initialised = False
         self.t_prev = math.nan
         self.rover_slips = SlipDetector()
-        self.base_slips = SlipDetector(gf_threshold_m=BASE_GF_SLIP_THRESHOLD_M, gf_drift_m_s=BASE_GF_DRIFT_M_S)
+        self.base_slips = SlipDetector(max_gap_s=BASE_MAX_ARC_GAP_S, gf_threshold_m=BASE_GF_SLIP_THRESHOLD_M,
+                                       gf_drift_m_s=BASE_GF_DRIFT_M_S)
+        self._age_var = None  # this epoch's per-satellite SD variance from the corrections' age [m^2]
         self._base_checked_time = math.nan
         self._base_ok = True
         self._base_msg = ""
@@ -378,9 +397,11 @@ class RtkFilter:
     def _new_ion(self, sat: str, var: float, t: float) -> None:
         self.layout.add(("ion", sat), 0.0, var)
         self.ion_seen[sat] = t
+        self.ion_prior_var[sat] = var
 
     def _drop_ion(self, sat: str) -> None:
         self.ion_seen.pop(sat, None)
+        self.ion_prior_var.pop(sat, None)
         self.layout.remove([("ion", sat)])
 
     # -----------------------------------------------------------------------------------------
@@ -542,6 +563,7 @@ class RtkFilter:
         ep = self._common_epoch(rover, base, sp_rover, sp_base)
         if ep is None:
             return self._single(t, spp, "no satellites common to rover and base", age)
+        self._age_var = correction_age.sd_variance_m2(age, len(ep.sats)) if opt.age_variance else None
         self._restart_slipped(ep)
         self._expire_states(t)
         # linearisation point: the state's position, or for a white-noise position (kinematic without
@@ -552,6 +574,8 @@ class RtkFilter:
         ok, var_sd = self._usable(ep, sd)
         sigma0 = self._switch_ionosphere(baseline_m)
         self._add_states(ep, ok, sd.el, sigma0)
+        if opt.iono_prior == "learned" and self.iono_active:
+            self._tighten_ionosphere(sigma0, sd.el, ep.sats)
         groups = choose_groups(opt.systems, ep.sys_, ok, sd.el, ep.nf, self._amb_variances(ep.sats, ok))
         n_sat_used = len({k for g in groups for k in g.sats})
         if not groups:
@@ -597,7 +621,7 @@ class RtkFilter:
         valid = sp_r.valid & sp_b.valid
         # same issue of data at both ends, or the orbit error does not cancel
         valid &= sp_r.ephemeris_index == sp_b.ephemeris_index
-        zd_base = zero_differences(bo, self.base_position_m, sp_b, self.base_antenna)
+        zd_base = zero_differences(bo, self.base_position_m, sp_b, self.base_antenna, self.opt.tropo_humidity)
         wl = ro.wavelength_m[:, :nf]
         same_wl = np.isclose(wl, bo.wavelength_m[:, :nf], rtol=0, atol=1e-9)
         sats = [str(s) for s in ro.sats]
@@ -639,7 +663,8 @@ class RtkFilter:
 
     def _single_differences(self, ep: _CommonEpoch, x_rov: np.ndarray) -> SingleDifferences:
         """The epoch's SDs with the rover model evaluated at x_rov."""
-        return single_differences(zero_differences(ep.rover, x_rov, ep.sp_rover, self.rover_antenna), ep.zd_base,
+        return single_differences(zero_differences(ep.rover, x_rov, ep.sp_rover, self.rover_antenna,
+                                                   self.opt.tropo_humidity), ep.zd_base,
                                   ep.nf)
 
     def _phase_variance(self, el: np.ndarray) -> np.ndarray:
@@ -647,13 +672,44 @@ class RtkFilter:
 
     def _switch_ionosphere(self, baseline_m: float) -> float:
         """The SD ionosphere's prior sigma0 [m] this epoch; the ionosphere enters the model for a VRS or a
-        baseline long enough to need it, and then stays."""
+        baseline long enough to need it, and then stays -- unless the learned prior (`iono_prior=learned`) shows
+        the day's level too small to matter."""
         opt = self.opt
         sigma0 = ionosphere_prior.iono_sigma0(baseline_m, self.base_is_vrs, opt.iono_sigma_m, opt.vrs_iono_sigma_m)
-        if ionosphere_prior.estimate_ionosphere(opt.ionosphere, sigma0):
+        estimate = ionosphere_prior.estimate_ionosphere(opt.ionosphere, sigma0)
+        if opt.iono_prior == "learned" and opt.iono_sigma_m is None and not self.base_is_vrs and self._learned.known:
+            # the day's level from fixed satellites (the per-km prior until then), which takes the ionosphere out
+            # of the model whenever it allows (one way: without it nothing more is learned)
+            sigma0 = self._learned.sigma0_m(baseline_m)
+            estimate = ionosphere_prior.estimate_ionosphere(opt.ionosphere, sigma0)
+            if not estimate and self.iono_active:
+                for sat in list(self.ion_seen):
+                    self._drop_ion(sat)
+                self.confirmation.reset()
+                self.iono_active = False
+        if estimate:
             self.iono_active = True
         self._iono_sigma_now = sigma0
         return sigma0
+
+    def _tighten_ionosphere(self, sigma0: float, el: np.ndarray, sats: list[str]) -> None:
+        """SD ionosphere states whose prior is wider than the learned one get a zero pseudo-observation making
+        up the difference (1/new = 1/old + 1/extra), as if they had started with it (the centre's way,
+        docs/decisions/0103)."""
+        m = ionosphere_prior.mapping(el)
+        for k, sat in enumerate(sats):
+            i = self.ion_state(sat)
+            old = self.ion_prior_var.get(sat)
+            if i is None or old is None:
+                continue
+            new = ionosphere_prior.prior_variance(sigma0, m[k])
+            if not new < ionosphere_prior.PRIOR_TIGHTER_SHARE * old:
+                continue
+            extra = 1.0 / (1.0 / new - 1.0 / old)
+            H = np.zeros((1, len(self.x)))
+            H[0, i] = 1.0
+            self._kalman_update(np.array([-self.x[i]]), H, np.array([[extra]]))
+            self.ion_prior_var[sat] = new
 
     def _add_states(self, ep: _CommonEpoch, ok: np.ndarray, el: np.ndarray, sigma0: float) -> None:
         """New SD ambiguities from code (cycles) for usable observations without one, and new SD
@@ -690,7 +746,7 @@ class RtkFilter:
     def _rows(self, ep: _CommonEpoch, dd: DDIndex, sd: SingleDifferences, var_sd: np.ndarray,
               keep: np.ndarray | None) -> Rows:
         """The DD rows at the SDs' linearisation point, those of `keep` only (None: all)."""
-        return dd_rows(dd, sd, ep.wl, ep.mu, var_sd, self.x, self._code_phase_ratio()).select(keep)
+        return dd_rows(dd, sd, ep.wl, ep.mu, var_sd, self.x, self._code_phase_ratio(), self._age_var).select(keep)
 
     def _screened_rows(self, ep: _CommonEpoch, dd: DDIndex, groups, sd: SingleDifferences, x_rov: np.ndarray,
                        var_sd: np.ndarray) -> tuple[DDIndex, Rows, np.ndarray]:
@@ -868,9 +924,10 @@ class RtkFilter:
                     res = phase_residuals(dd, rows, sd, ep.wl, ep.mu, x_lin, self.x)
                     rows = np.delete(rows, int(np.argmax(np.abs(res))))
                 continue
-            worst = int(np.argmax(np.abs(result.residuals)))
-            residual_ok = abs(result.residuals[worst]) <= MAX_FIXED_PHASE_RESIDUAL_M
-            if result.sigma_m > MAX_FIXED_POSITION_SIGMA_M:
+            max_sigma, max_res = self._fixed_limits(dd, rows, sd)
+            worst = int(np.argmax(np.abs(result.residuals) / max_res))
+            residual_ok = abs(result.residuals[worst]) <= max_res[worst]
+            if result.sigma_m > max_sigma:
                 # A partial fix of a few combinations (wide-lane-like) can pass its tests and still leave
                 # the position at float precision: that is not an RTK fix and is not reported as one,
                 # but its integers are a decision the next epochs' fixes must agree with.
@@ -896,6 +953,30 @@ class RtkFilter:
             self.confirmation.reset()
         sol.message = message
 
+    def _fixed_limits(self, dd: DDIndex, rows: np.ndarray, sd: SingleDifferences) -> tuple[float, np.ndarray]:
+        """The largest 3-D position sigma [m] and DD phase residuals [m] (per row) a fixed solution of `rows`
+        may have: MAX_FIXED_POSITION_SIGMA_M and MAX_FIXED_PHASE_RESIDUAL_M, grown by what aged corrections
+        alone give a fixed solution (the position covariance (G^T A^-1 G)^-1 of the age's DD covariance A,
+        the rows' own age sigma times AGE_RESIDUAL_SIGMAS): the age is no reason to doubt integers already
+        fixed.  Only while a declared fix continues: a new fix needs the limits themselves (with a 30 s base a
+        1 Hz rover reuses each base epoch's noise 30 times, and the float grows overconfident between base
+        epochs: at 144 km relaxed limits let 6-of-14 partial fixes 80 cm off through, docs/decisions/0162)."""
+        if self._age_var is None or not np.any(self._age_var > 0.0) or self.consecutive_fixes == 0:
+            return MAX_FIXED_POSITION_SIGMA_M, np.full(len(rows), MAX_FIXED_PHASE_RESIDUAL_M)
+        k, ref = dd.k[rows], dd.ref[rows]
+        A = correction_age.dd_covariance(k, ref, self._age_var)
+        max_res = np.sqrt(MAX_FIXED_PHASE_RESIDUAL_M**2 + AGE_RESIDUAL_SIGMAS**2 * np.diag(A))
+        # one slot's rows (the others carry the same age error): the age-only fixed position covariance
+        f0 = np.bincount(dd.f[rows]).argmax()
+        sel = dd.f[rows] == f0
+        G = -(sd.los[k[sel]] - sd.los[ref[sel]])
+        try:
+            Ai = np.linalg.inv(A[np.ix_(sel, sel)])
+            age_var = float(np.trace(np.linalg.inv(G.T @ Ai @ G)))
+        except np.linalg.LinAlgError:
+            age_var = 0.0
+        return math.sqrt(MAX_FIXED_POSITION_SIGMA_M**2 + max(age_var, 0.0)), max_res
+
     def _declare_or_confirm(self, sol: RtkSolution, dd: DDIndex, ep: _CommonEpoch, rows: np.ndarray,
                             attempt: _FixAttempt, n_all: int) -> None:
         """A validated complete fix: declared when its decision has agreed long enough, else a candidate."""
@@ -903,6 +984,11 @@ class RtkFilter:
         need = self._confirm_needed()
         if count >= need:
             self._accept_fix(sol, attempt, n_all)
+            if self.opt.iono_prior == "learned" and dd.ion is not None:
+                r = rows[dd.f[rows] == 0]
+                el = ep.zd_base.el
+                m = np.hypot(ionosphere_prior.mapping(el[dd.k[r]]), ionosphere_prior.mapping(el[dd.ref[r]]))
+                self._learned.learn_fixed(ep.t, (attempt.x[dd.ion[r]] - attempt.x[dd.ion_ref[r]]) / m)
             keys = [(ep.sats[dd.k[r]], ep.sats[dd.ref[r]], int(dd.f[r])) for r in rows]
             sol.fixed_dd = FixedIntegers.determined(keys, attempt.x, attempt.P, dd.i[rows], dd.iref[rows])
         else:
