@@ -232,10 +232,10 @@ def test_with_the_base_interpolated_no_fix_is_off_by_10_cm(upc, rover):
 
 
 @pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "issue 14 asks for ours at least as good as GARR alone on every figure; measured (2026-12-03): RTKLIB "
-    "defaults UPC1 3,600/3,600 fixed on both, H95 3.9 cm on both, fixes off by > 10 cm 48 on the VRS against "
-    "26 on GARR (all at correction ages 15-30 s, the VRS 1.7 cm lower than the GARR-tied truth); with "
-    "timeinterp 0 and 0 off, H95 1.8 against 1.6 cm (the VRS 0.7 cm north of the GARR-tied truth)"))
+    "issue 14 asks for ours at least as good as GARR alone on every figure; measured (2026-12-03) against the "
+    "troposphere-estimated truth, UPC1 / UPC2: fixed 3,600 on both; H95 3.78 vs 4.04 / 3.80 vs 4.07 cm; off by "
+    "> 10 cm 30 vs 50 / 21 vs 46; with timeinterp H95 2.05 vs 2.44, V95 4.13 vs 5.98 cm, 0 vs 0 off; but V95 "
+    "with RTKLIB's defaults 6.95 vs 6.68 / 6.82 vs 6.67 cm (30 s corrections 15-30 s old dominate both)"))
 def test_the_vrs_is_at_least_as_good_as_garr_on_every_figure(upc):
     worse = []
     for (rover, setting, base), vrs in upc["figures"].items():
