@@ -78,10 +78,11 @@ async def _main(settings: SystemSettings):
             return None
     print(f"augnet up: scenario {settings.scenario}, {len(system.trains)} trains", flush=True)
     print(f"console: {system.console_url or 'off'}", flush=True)
+    where = settings.state_path or "no state file (--state)"
     if system.admin_password_created:
-        print(f"console admin account created: admin / {system.admin_password_created}", flush=True)
+        print(f"console admin account created: admin, password in {where}", flush=True)
     if system.admin_token:
-        print(f"console admin token: {system.admin_token}", flush=True)
+        print(f"console admin token (open the page with {system.console_url}#token=TOKEN): in {where}", flush=True)
     print(f"caster: ntrip://127.0.0.1:{system.caster.port}/VRS (user {system.credentials['train_user']}, "
           f"password in {settings.state_path})", flush=True)
     if settings.view and sys.stdout.isatty():
