@@ -31,7 +31,7 @@ def up(
     report: Optional[Path] = typer.Option(None, help="Run report path (default with --duration: augnet-run-report.json)."),
     state: Path = typer.Option(Path("augnet-up.json"), help="Where tools find the URLs and credentials of this run."),
     admin_password: str = typer.Option("", envvar="AUGNET_ADMIN_PASSWORD",
-                                       help="Console admin password (first run; default: random, printed)."),
+                                       help="Console admin password (first run; default: random, written to the state file)."),
 ) -> None:
     """Stations, caster, centre, RSSP-I link, trains and console in one asyncio process."""
     settings = SystemSettings(scenario=scenario, trains=trains, duration_s=duration, db_url=db, host=host,

@@ -37,7 +37,7 @@ class SystemSettings:
     view: bool = True
     report_path: Path | None = None
     state_path: Path | None = Path("augnet-up.json")  # where tools find the URLs and credentials
-    admin_password: str = ""  # "" -> a random one, printed once
+    admin_password: str = ""  # "" -> a random one, written to the state file (0600)
 
     def validate(self) -> "SystemSettings":
         if self.trains is not None and not 0 <= self.trains <= MAX_LIVE_TRAINS:
