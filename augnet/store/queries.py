@@ -152,6 +152,10 @@ def issue_token(session: Session, operator: Operator, lifetime: dt.timedelta | N
     return token
 
 
+def token_row(session: Session, token: str) -> ApiToken | None:
+    return session.scalar(select(ApiToken).where(ApiToken.token_sha256 == _digest(token)))
+
+
 def is_bootstrap_token(session: Session, token: str | None) -> bool:
     """Whether `token` is this store's bootstrap token (and its operator still enabled)."""
     if not token:

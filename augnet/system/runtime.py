@@ -74,6 +74,7 @@ class System:
         self.publisher = LivePublisher()
         self.console_server = None
         self.admin_token: str | None = None
+        self.admin_name = ADMIN_NAME
         self.admin_password: str | None = None  # into the state file, never to stdout
         self.admin_password_created = False
         self.trains: dict[str, OnboardTrain] = {}
@@ -208,7 +209,7 @@ class System:
                                read_state(self.settings.state_path))
         if boot is None:  # no enabled admin of that name: log in with your own account
             return None
-        self.admin_password, self.admin_password_created = boot.password, boot.created
+        self.admin_name, self.admin_password, self.admin_password_created = boot.name, boot.password, boot.created
         return boot.token
 
     def _start_trains(self, sc: Scenario, train_rx, port: int) -> None:
@@ -243,7 +244,7 @@ class System:
                             "user": self.credentials["train_user"], "password": self.credentials["train_password"]},
                  "scenario": self.settings.scenario, "pid": os.getpid()}
         if self.admin_password:
-            state.update(admin_name=ADMIN_NAME, admin_password=self.admin_password)
+            state.update(admin_name=self.admin_name, admin_password=self.admin_password)
         write_private(self.settings.state_path, state)  # 0600 from the first byte: credentials inside
 
     @property

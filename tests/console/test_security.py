@@ -353,6 +353,11 @@ def test_logout_keeps_the_bootstrap_token_and_the_page_trades_it(sqlite_sessions
         assert client.post("/api/auth/logout", headers=own).status_code == 204
         assert client.get("/api/auth/me", headers=own).status_code == 401
         assert client.get("/api/auth/me", headers=bearer).status_code == 200
+        # a session token does not renew itself
+        again = client.post("/api/auth/session", headers={"Authorization": f"Bearer {traded.json()['token']}"})
+        assert again.status_code in (401, 409)
+        fresh = {"Authorization": f"Bearer {client.post('/api/auth/session', headers=bearer).json()['token']}"}
+        assert client.post("/api/auth/session", headers=fresh).status_code == 409
     js = (STATIC_DIR / "console.js").read_text()
     assert '"/api/auth/session"' in js
 

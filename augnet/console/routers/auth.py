@@ -71,11 +71,16 @@ def login(body: LoginIn, session: DB, request: Request) -> TokenOut:
     return _issue(session, op)
 
 
-@router.post("/session", response_model=TokenOut)
+@router.post("/session", response_model=TokenOut,
+             responses={409: {"description": "the token already expires: it is not traded for a longer one"}})
 def session_token(who: Caller, session: DB) -> TokenOut:
-    """A session token (LOGIN_TOKEN_LIFETIME) for the caller, whatever token it came with: the page opened
-    with the state file's bootstrap token (`#token=`) trades it for one, so that logging out revokes the
-    page's own token and never the bootstrap token."""
+    """A session token (LOGIN_TOKEN_LIFETIME) for a long-lived token (the bootstrap token, or one from
+    `augnet console token --hours 0`): the page opened with the state file's token (`#token=`) trades it
+    for one, so that logging out revokes the page's own token and never the bootstrap token. A token that
+    expires is refused (409): trading it would let a stolen session token renew itself for ever."""
+    row = q.token_row(session, who.token)
+    if row is None or row.expires_at is not None:
+        raise q.Conflict("only a long-lived token is traded for a session token; this one is used as it is")
     op = q.get_operator(session, who.name)
     q.audit(session, who.name, "token.issue", who.name, reason="session",
             lifetime_s=int(LOGIN_TOKEN_LIFETIME.total_seconds()))

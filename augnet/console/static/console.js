@@ -432,10 +432,10 @@ function boot() {
 async function adopt(linkToken) {
   try {
     const resp = await fetch("/api/auth/session", { method: "POST", headers: { "Authorization": "Bearer " + linkToken } });
-    if (!resp.ok) { $("login").hidden = false; $("login-error").textContent = "the link's token is not valid"; return; }
-    const tok = await resp.json();
-    state.token = tok.token;
-    sessionStorage.setItem("augnet.token", tok.token);
+    if (resp.status === 409) state.token = linkToken;  // a token that expires anyway: the page uses it as it is
+    else if (!resp.ok) { $("login").hidden = false; $("login-error").textContent = "the link's token is not valid"; return; }
+    else state.token = (await resp.json()).token;
+    sessionStorage.setItem("augnet.token", state.token);
     await start();
   } catch (e) { $("login").hidden = false; $("login-error").textContent = String(e); }
 }
