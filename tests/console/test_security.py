@@ -146,6 +146,27 @@ def test_throttled_per_address_and_per_name(stepped):
         assert _login(other, "otto", MARKER).status_code == 401  # and the success reset the name's count
 
 
+def test_a_concurrent_burst_verifies_at_most_the_free_failures():
+    """The sans-IO core: attempts in flight count against the free failures, so 50 guesses arriving together
+    (the route's worker threads) run FREE_FAILURES verifications, the rest wait a second."""
+    from augnet.console.throttle import FORGET_AFTER_S, LoginThrottle
+
+    t = LoginThrottle()
+    verdicts = [t.admit("203.0.113.9", "ada", 0.0) for _ in range(50)]
+    assert [v.retry_after_s for v in verdicts] == [0] * FREE_FAILURES + [1] * (50 - FREE_FAILURES)
+    for _ in range(FREE_FAILURES):
+        t.failed("203.0.113.9", "ada", 0.0)
+    assert t.admit("203.0.113.9", "ada", 0.0).retry_after_s == backoff_s(FREE_FAILURES)
+    assert t.admit("203.0.113.9", "ada", 0.0 + backoff_s(FREE_FAILURES)).retry_after_s == 0  # one, after the lock
+    assert t.admit("203.0.113.9", "ada", 0.0 + backoff_s(FREE_FAILURES)).retry_after_s == 1  # and only one
+    t.failed("203.0.113.9", "ada", 1.0)
+    assert t.admit("203.0.113.9", "ada", 1.0 + FORGET_AFTER_S + 1).retry_after_s == 0  # an hour quiet: forgotten
+    small = LoginThrottle(max_keys=4)
+    for i in range(10):
+        small.admit(f"a{i}", f"n{i}", 0.0)
+    assert len(small._keys) == 4  # bounded memory under a spray of names and addresses
+
+
 def test_a_failure_in_verification_does_not_leave_the_name_locked(stepped, monkeypatch):
     client, _, _, _ = stepped
 
