@@ -13,7 +13,8 @@ Rules (per key; a key is ("addr", client address) or ("user", submitted name), c
   * attempts in flight count against the free ones, so a burst of concurrent guesses cannot run more
     than FREE_FAILURES verifications before the first lock;
   * a success forgets the name's failures (not the address's: a valid account must not reset the
-    counter of an address spraying other names); a key quiet for FORGET_AFTER_S is forgotten.
+    counter of an address spraying other names); a key quiet for FORGET_AFTER_S is forgotten;
+  * ALARM_FAILURES failures of one key, or ALARM_REFUSALS refusals of one address, ask for an alarm.
 """
 
 from __future__ import annotations
@@ -33,6 +34,10 @@ FORGET_AFTER_S = 3600.0  # a key with no failure for an hour (and not locked) st
 # Keys remembered (addresses + names); beyond this the least recently failed are dropped first.
 MAX_KEYS = 100_000
 RETRY_WHILE_IN_FLIGHT_S = 1  # Retry-After when refused only because other attempts are being verified
+# An alarm for the operators: twice the free failures (past any typing slip) for one address or one name, or
+# this many refused attempts from one address (a client ignoring Retry-After: a script, not a person).
+ALARM_FAILURES = 2 * FREE_FAILURES
+ALARM_REFUSALS = 50
 
 
 @dataclass(slots=True)
@@ -41,6 +46,7 @@ class _KeyState:
     locked_until: float = 0.0
     last_failure: float = 0.0
     in_flight: int = 0
+    refused: int = 0
     lock_audited: bool = True  # whether the current lock's first refusal was audited (no lock: True)
 
 
@@ -51,6 +57,16 @@ class Verdict:
     retry_after_s: int
     audit: bool = False  # a refusal worth its own audit entry (the first of a lock)
     refused_unaudited: int = 0  # earlier refusals from this address not yet in the audit log
+    alarm: bool = False  # this refusal made the address's count reach ALARM_REFUSALS
+
+
+@dataclass(frozen=True, slots=True)
+class Failure:
+    """`failed()`'s answer."""
+
+    failures: int  # consecutive failures of the name
+    refused_unaudited: int  # refusals from the address not yet in the audit log
+    alarm: bool  # the address's or the name's failures just reached ALARM_FAILURES
 
 
 @dataclass(slots=True)
@@ -103,32 +119,36 @@ class LoginThrottle:
             wait = max(self._wait(st, now) for st in states)
             if wait:
                 self.counters.refused += 1
+                states[0].refused += 1
+                alarm = states[0].refused == ALARM_REFUSALS
                 first = [st for st in states if not st.lock_audited and st.locked_until > now]
                 for st in first:
                     st.lock_audited = True
-                if first:
-                    return Verdict(wait, audit=True, refused_unaudited=self._unaudited.pop(address, 0))
+                if first or alarm:
+                    return Verdict(wait, audit=True, refused_unaudited=self._unaudited.pop(address, 0), alarm=alarm)
                 self._unaudited[address] = self._unaudited.get(address, 0) + 1
                 return Verdict(wait)
             for st in states:
                 st.in_flight += 1
             return Verdict(0)
 
-    def failed(self, address: str, name: str, now: float) -> tuple[int, int]:
-        """A verified attempt failed: (failures of the name, refusals from the address not yet audited)."""
+    def failed(self, address: str, name: str, now: float) -> Failure:
+        """A verified attempt failed."""
         with self._lock:
             self.counters.failed += 1
+            alarm = False
             for key in (("addr", address), ("user", name)):
                 st = self._state(key, now)
                 st.in_flight = max(0, st.in_flight - 1)
                 st.failures += 1
+                alarm |= st.failures == ALARM_FAILURES
                 st.last_failure = now
                 lock = backoff_s(st.failures)
                 if lock:
                     st.locked_until = now + lock
                     st.lock_audited = False
                 self._keys.move_to_end(key)
-            return self._keys[("user", name)].failures, self._unaudited.pop(address, 0)
+            return Failure(self._keys[("user", name)].failures, self._unaudited.pop(address, 0), alarm)
 
     def succeeded(self, address: str, name: str, now: float) -> int:
         """A verified attempt succeeded: the name starts afresh. Returns the address's unaudited refusals."""

@@ -4,8 +4,10 @@ Failed logins are throttled per client address and per name (augnet.console.thro
 then 429 with Retry-After, the password not even verified) and audited without the password:
 `operator.login_failed` for each wrong password, `operator.login_refused` for the first refusal of each
 lock, carrying how many refusals from that address went unrecorded since the last entry (`refused`), so
-the log accounts for every attempt without one row per request of a flood. The client address is the TCP
-peer's: a reverse proxy in front would make every operator one address (X-Forwarded-For is not trusted).
+the log accounts for every attempt without one row per request of a flood. Past ALARM_FAILURES failures
+or ALARM_REFUSALS refusals a `console-login-failures` alarm (warning, one open per address) is raised.
+The client address is the TCP peer's: a reverse proxy in front would make every operator one address
+(X-Forwarded-For is not trusted).
 """
 
 from __future__ import annotations
@@ -17,16 +19,23 @@ from fastapi import APIRouter, Depends, HTTPException, Request, Response, status
 from augnet.console.deps import DB, Principal, current_principal, unauthorized, utc
 from augnet.console.schemas import LoginIn, OperatorOut, TokenOut
 from augnet.console.security import LOGIN_TOKEN_LIFETIME, authenticate
-from augnet.console.throttle import LoginThrottle
+from augnet.console.throttle import ALARM_FAILURES, ALARM_REFUSALS, LoginThrottle
 from augnet.store import queries as q
+from augnet.store.models import Severity
 
 router = APIRouter(prefix="/auth", tags=["auth"])
 Caller = Annotated[Principal, Depends(current_principal)]
 ANONYMOUS = "anonymous"  # the audit actor of a failed login: nobody was authenticated
+LOGIN_ALARM_KIND = "console-login-failures"
 
 
 def client_address(request: Request) -> str:
     return request.client.host if request.client else "unknown"
+
+
+def _alarm(session, address: str, message: str) -> None:
+    """Someone is guessing passwords: an alarm on the console's page (one open alarm per address)."""
+    q.raise_alarm(session, LOGIN_ALARM_KIND, address[:64], Severity.WARNING, message)
 
 
 def _issue(session, op) -> TokenOut:
@@ -51,6 +60,9 @@ def login(body: LoginIn, session: DB, request: Request) -> TokenOut:
         if verdict.audit:
             q.audit(session, ANONYMOUS, "operator.login_refused", body.name, address=address,
                     retry_after_s=verdict.retry_after_s, refused=1 + verdict.refused_unaudited)
+            if verdict.alarm:
+                _alarm(session, address, f"{ALARM_REFUSALS} console logins from {address} refused by the "
+                                         f"throttle: a client ignoring Retry-After")
             session.commit()
         raise HTTPException(status.HTTP_429_TOO_MANY_REQUESTS, "too many failed logins; retry later",
                             headers={"Retry-After": str(verdict.retry_after_s)})
@@ -60,9 +72,12 @@ def login(body: LoginIn, session: DB, request: Request) -> TokenOut:
         throttle.abandon(address, body.name)
         raise
     if op is None:
-        failures, unaudited = throttle.failed(address, body.name, clock())
-        q.audit(session, ANONYMOUS, "operator.login_failed", body.name, address=address, failures=failures,
-                **({"refused": unaudited} if unaudited else {}))
+        fail = throttle.failed(address, body.name, clock())
+        q.audit(session, ANONYMOUS, "operator.login_failed", body.name, address=address, failures=fail.failures,
+                **({"refused": fail.refused_unaudited} if fail.refused_unaudited else {}))
+        if fail.alarm:
+            _alarm(session, address, f"{ALARM_FAILURES} failed console logins from {address} or for one name "
+                                     f"(see the audit log: operator.login_failed)")
         session.commit()
         raise unauthorized("wrong name or password")
     unaudited = throttle.succeeded(address, body.name, clock())
