@@ -27,8 +27,8 @@ from dataclasses import dataclass, field
 # sheet suggests ("a small number"); Django-axes and fail2ban's sshd jail default to 3 and 5.
 FREE_FAILURES = 5
 BACKOFF_BASE_S = 1.0  # first lock after the free failures; doubles with each failure after it
-# Longest lock: 15 min, AWS Cognito's and Microsoft Entra smart lockout's order. 100 guesses then take
-# days; an operator who forgot the password waits a quarter of an hour at worst.
+# Longest lock: 15 min. Amazon Cognito's user pools do the same (5 free failures, a lock from 1 s doubling to
+# about 15 min). 100 guesses at one name then take 21.5 h; an operator locked out waits 15 min at worst.
 MAX_LOCKOUT_S = 900.0
 FORGET_AFTER_S = 3600.0  # a key with no failure for an hour (and not locked) starts afresh
 # Keys remembered (addresses + names); beyond this the least recently failed are dropped first.
