@@ -15,6 +15,8 @@ app = typer.Typer(help="The operator console.", no_args_is_help=True, add_comple
 
 DEFAULT_PORT = 8000
 DEFAULT_HOST = "127.0.0.1"
+DEFAULT_STATE = "augnet-console.json"  # `console serve`'s state file
+UP_STATE = "augnet-up.json"  # `augnet up`'s (augnet.system.settings)
 
 
 @app.command()
@@ -22,20 +24,29 @@ def serve(db: str = typer.Option(DEFAULT_URL, "--db", help="store URL: sqlite://
           host: str = typer.Option(DEFAULT_HOST, "--host"),
           port: int = typer.Option(DEFAULT_PORT, "--port", min=1, max=65535),
           admin: str = typer.Option("admin", "--admin", help="name of the first admin, created if the store has none"),
+          state: Path = typer.Option(Path(DEFAULT_STATE), "--state",
+                                     help="state file (0600): the console URL, the store's bootstrap token, a new "
+                                          "admin's password"),
           ) -> None:
     """Serve the console over a store with no live system (the live sections stay empty)."""
     import uvicorn
 
     from augnet.console.app import create_app
-    from augnet.console.security import ensure_admin
+    from augnet.console.security import bootstrap_admin
+    from augnet.console.statefile import read_state, write_private
     from augnet.store import open_store
 
     sessions = open_store(db)
-    boot = ensure_admin(sessions, admin)
+    boot = bootstrap_admin(sessions, admin, previous=read_state(state))
+    url = f"http://{host}:{port}/"
     if boot is not None:
-        typer.echo(f"created admin account {boot.name!r} password {boot.password!r}")
-        typer.echo(f"admin API token: {boot.token}")
-        typer.echo(f"page: http://{host}:{port}/#token={boot.token}")
+        info = {"console_url": url, "admin_name": boot.name, "admin_token": boot.token}
+        if boot.password:
+            info["admin_password"] = boot.password
+        write_private(state, info)
+        if boot.created:
+            typer.echo(f"created admin account {boot.name!r}: password in {state}")
+        typer.echo(f"admin token in {state}; open the page with {url}#token=TOKEN")
     uvicorn.run(create_app(sessions), host=host, port=port, log_level="warning")
 
 
@@ -71,20 +82,40 @@ def add_operator(name: str = typer.Argument(...),
 
 
 @app.command()
-def token(name: str = typer.Argument(..., help="operator name"),
+def token(name: str = typer.Argument(None, help="operator name (with --rotate: the bootstrap token's new holder)"),
           db: str = typer.Option(DEFAULT_URL, "--db"),
-          hours: float = typer.Option(12.0, "--hours", min=0.0, help="lifetime; 0 = never expires")) -> None:
-    """Issue an API token for an operator (printed once; only its hash is stored)."""
-    from augnet.console.security import issue_operator_token
+          hours: float = typer.Option(12.0, "--hours", min=0.0, help="lifetime; 0 = never expires"),
+          rotate: bool = typer.Option(False, "--rotate", help="replace the store's bootstrap token (the one in "
+                                                              "the state file); the old one stops working"),
+          state: Path = typer.Option(None, "--state", help="with --rotate: the state file to write the new token "
+                                                           "to (default: augnet-up.json if it exists)")) -> None:
+    """Issue an API token for an operator (printed once; only its hash is stored), or rotate the bootstrap
+    token (written to the state file, printed only when there is none)."""
+    from augnet.console.security import issue_operator_token, rotate_bootstrap
+    from augnet.console.statefile import update_state
     from augnet.store import open_store
     from augnet.store import queries as q
 
+    if not rotate and not name:
+        raise typer.BadParameter("give an operator name, or --rotate", param_hint="NAME")
     try:
-        tok = issue_operator_token(open_store(db), name, lifetime=dt.timedelta(hours=hours) if hours else None)
-    except q.NotFound as exc:
+        if rotate:
+            boot = rotate_bootstrap(open_store(db), name)
+        else:
+            tok = issue_operator_token(open_store(db), name, lifetime=dt.timedelta(hours=hours) if hours else None)
+    except (q.NotFound, q.Conflict) as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(1)
-    typer.echo(tok)
+    if not rotate:
+        typer.echo(tok)
+        return
+    if state is None and Path(UP_STATE).exists():
+        state = Path(UP_STATE)
+    if state is None:
+        typer.echo(boot.token)
+        return
+    update_state(state, admin_token=boot.token, admin_name=boot.name)
+    typer.echo(f"bootstrap token of {boot.name} rotated: the new one is in {state}")
 
 
 @app.command()

@@ -154,8 +154,9 @@ def _gauge(out: list[str], name: str, help_text: str, samples: list[tuple[dict, 
 
 
 def render(request_metrics: RequestMetrics, live: LiveState, session: Session,
-           caster_snapshot: dict | None = None) -> str:
-    """The whole exposition: request metrics, the live system's state, open alarms."""
+           caster_snapshot: dict | None = None, logins=None) -> str:
+    """The whole exposition: request metrics, the live system's state, open alarms, login outcomes
+    (`logins`: augnet.console.throttle.Counters)."""
     out = request_metrics.lines()
     now = time.time()
 
@@ -199,6 +200,12 @@ def render(request_metrics: RequestMetrics, live: LiveState, session: Session,
     out += ["# HELP augnet_console_live_events_total Live events published to websocket subscribers.",
             "# TYPE augnet_console_live_events_total counter",
             f"augnet_console_live_events_total {live.events_published}"]
+
+    if logins is not None:  # a rising "failed" or "refused" is someone guessing passwords
+        out += ["# HELP augnet_console_logins_total Console login attempts by outcome (refused: throttled, "
+                "not verified).", "# TYPE augnet_console_logins_total counter"]
+        out += [f"augnet_console_logins_total{labels(outcome=k)} {getattr(logins, k)}"
+                for k in ("succeeded", "failed", "refused")]
 
     snap = caster_snapshot
     if snap is not None:

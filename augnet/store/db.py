@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from alembic import command
 from alembic.config import Config
 from sqlalchemy import create_engine, event
-from sqlalchemy.engine import Engine
+from sqlalchemy.engine import Engine, make_url
 from sqlalchemy.orm import Session, sessionmaker
 
 MIGRATIONS_DIR = Path(__file__).with_name("migrations")
@@ -42,12 +43,39 @@ def _sqlite_pragmas(dbapi_conn, _record) -> None:
     cur.close()
 
 
+# The store holds password and token hashes: owner read/write only. SQLite gives its -wal, -shm and -journal
+# files the database file's own mode (os_unix.c findCreateFileMode, unixOpenSharedMemory), so a database
+# file created 0600 keeps them 0600 too; files left by an older, laxer run are narrowed when opened.
+PRIVATE_FILE_MODE = 0o600
+SQLITE_SIDE_FILES = ("-wal", "-shm", "-journal")
+
+
+def private_sqlite_file(url: str) -> Path | None:
+    """Create the SQLite database file of `url` owner-only (0600) before SQLite does, or narrow an existing
+    one and its side files to 0600. Returns its path (None: in memory or a URI filename, nothing to do)."""
+    database = make_url(url).database
+    if not database or database == ":memory:" or database.startswith("file:"):
+        return None
+    path = Path(database)
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, PRIVATE_FILE_MODE)  # an empty file is an empty database
+    try:
+        os.fchmod(fd, PRIVATE_FILE_MODE)  # an existing file keeps its mode through O_CREAT
+    finally:
+        os.close(fd)
+    for suffix in SQLITE_SIDE_FILES:
+        side = path.with_name(path.name + suffix)
+        if side.exists():
+            side.chmod(PRIVATE_FILE_MODE)
+    return path
+
+
 def make_engine(url: str = DEFAULT_URL) -> Engine:
     url = normalise_url(url)
     if not url.startswith(("sqlite", "postgresql")):
         raise StoreError(f"database URL {url!r}: expected sqlite:///FILE or postgresql://...")
     engine = create_engine(url, pool_pre_ping=True)
     if engine.dialect.name == "sqlite":
+        private_sqlite_file(url)
         event.listen(engine, "connect", _sqlite_pragmas)
     return engine
 

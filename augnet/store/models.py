@@ -143,6 +143,9 @@ class ApiToken(Base):
     token_sha256: Mapped[str] = mapped_column(String(64), unique=True)  # tokens are random, so SHA-256 is enough
     created_at: Mapped[dt.datetime] = mapped_column(default=utcnow)
     expires_at: Mapped[dt.datetime | None] = mapped_column(default=None)
+    # "session" (login, CLI), or "bootstrap": the one long-lived token per store that `augnet up` writes to its
+    # state file; logout does not revoke it, `augnet console token --rotate` replaces it
+    kind: Mapped[str] = mapped_column(String(16), default="session", server_default="session")
     operator: Mapped[Operator] = relationship(back_populates="tokens")
 
 

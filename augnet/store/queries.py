@@ -28,6 +28,7 @@ from augnet.store.models import (
 )
 
 TOKEN_BYTES = 32  # 256-bit random API tokens
+TOKEN_SESSION, TOKEN_BOOTSTRAP = "session", "bootstrap"  # ApiToken.kind
 ROLE_RANK = {Role.VIEWER: 0, Role.OPERATOR: 1, Role.ADMIN: 2}
 
 
@@ -138,18 +139,41 @@ def add_operator(session: Session, actor: str, name: str, password_hash: str, ro
     return op
 
 
-def issue_token(session: Session, operator: Operator, lifetime: dt.timedelta | None = None) -> str:
+def _digest(token: str) -> str:
+    return hashlib.sha256(token.encode()).hexdigest()
+
+
+def issue_token(session: Session, operator: Operator, lifetime: dt.timedelta | None = None,
+                kind: str = TOKEN_SESSION) -> str:
     """A new random API token for the operator; only its SHA-256 is stored."""
     token = secrets.token_urlsafe(TOKEN_BYTES)
     expires = utcnow() + lifetime if lifetime else None
-    session.add(ApiToken(operator=operator, token_sha256=hashlib.sha256(token.encode()).hexdigest(),
-                         expires_at=expires))
+    session.add(ApiToken(operator=operator, token_sha256=_digest(token), expires_at=expires, kind=kind))
+    return token
+
+
+def token_row(session: Session, token: str) -> ApiToken | None:
+    return session.scalar(select(ApiToken).where(ApiToken.token_sha256 == _digest(token)))
+
+
+def is_bootstrap_token(session: Session, token: str | None) -> bool:
+    """Whether `token` is this store's bootstrap token (and its operator still enabled)."""
+    if not token:
+        return False
+    row = session.scalar(select(ApiToken).where(ApiToken.token_sha256 == _digest(token)))
+    return row is not None and row.kind == TOKEN_BOOTSTRAP and row.operator.enabled
+
+
+def rotate_bootstrap_token(session: Session, actor: str, operator: Operator, reason: str = "rotate") -> str:
+    """Replace the store's one bootstrap token (whoever held it) with a new one for `operator`; never expires."""
+    revoked = session.execute(delete(ApiToken).where(ApiToken.kind == TOKEN_BOOTSTRAP)).rowcount
+    token = issue_token(session, operator, None, kind=TOKEN_BOOTSTRAP)
+    audit(session, actor, "token.rotate", operator.name, kind=TOKEN_BOOTSTRAP, reason=reason, revoked=revoked)
     return token
 
 
 def operator_for_token(session: Session, token: str) -> Operator | None:
-    digest = hashlib.sha256(token.encode()).hexdigest()
-    row = session.scalar(select(ApiToken).where(ApiToken.token_sha256 == digest))
+    row = session.scalar(select(ApiToken).where(ApiToken.token_sha256 == _digest(token)))
     if row is None or not row.operator.enabled:
         return None
     if row.expires_at is not None:
@@ -254,11 +278,13 @@ def update_operator(session: Session, actor: str, name: str, *, role: Role | Non
 
 
 def revoke_token(session: Session, actor: str, token: str) -> bool:
-    """Forget one API token (logout). True when it existed."""
-    digest = hashlib.sha256(token.encode()).hexdigest()
-    row = session.scalar(select(ApiToken).where(ApiToken.token_sha256 == digest))
+    """Forget one API token (logout). True when it existed. The bootstrap token is not revoked this way
+    (Conflict): a page opened with it trades it for a session token, and the CLI rotates it."""
+    row = session.scalar(select(ApiToken).where(ApiToken.token_sha256 == _digest(token)))
     if row is None:
         return False
+    if row.kind == TOKEN_BOOTSTRAP:
+        raise Conflict("the bootstrap token is not revoked by logout: rotate it with `augnet console token --rotate`")
     session.delete(row)
     audit(session, actor, "token.revoke", row.operator.name)
     return True

@@ -31,7 +31,7 @@ def up(
     report: Optional[Path] = typer.Option(None, help="Run report path (default with --duration: augnet-run-report.json)."),
     state: Path = typer.Option(Path("augnet-up.json"), help="Where tools find the URLs and credentials of this run."),
     admin_password: str = typer.Option("", envvar="AUGNET_ADMIN_PASSWORD",
-                                       help="Console admin password (first run; default: random, printed)."),
+                                       help="Console admin password (first run; default: random, written to the state file)."),
     service_radius_km: Optional[float] = typer.Option(
         None, help="VRS served up to this far from the nearest station (default: the largest station spacing)."),
     outside_area: str = typer.Option("refuse", help="A client outside the service area: refuse, or nearest "
@@ -83,10 +83,11 @@ async def _main(settings: SystemSettings):
             return None
     print(f"augnet up: scenario {settings.scenario}, {len(system.trains)} trains", flush=True)
     print(f"console: {system.console_url or 'off'}", flush=True)
+    where = settings.state_path or "no state file (--state)"
     if system.admin_password_created:
-        print(f"console admin account created: admin / {system.admin_password_created}", flush=True)
+        print(f"console admin account created: admin, password in {where}", flush=True)
     if system.admin_token:
-        print(f"console admin token: {system.admin_token}", flush=True)
+        print(f"console admin token (open the page with {system.console_url}#token=TOKEN): in {where}", flush=True)
     print(f"caster: ntrip://127.0.0.1:{system.caster.port}/VRS (user {system.credentials['train_user']}, "
           f"password in {settings.state_path})", flush=True)
     if settings.view and sys.stdout.isatty():

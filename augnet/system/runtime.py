@@ -21,13 +21,11 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import gc
-import json
 import logging
 import os
 import secrets
 import signal
 import time
-from pathlib import Path
 
 from augnet.centre.engine import SUBJECT_ALARMS, EpochReport
 from augnet.onboard.trackmap import TrackDatabase
@@ -76,7 +74,9 @@ class System:
         self.publisher = LivePublisher()
         self.console_server = None
         self.admin_token: str | None = None
-        self.admin_password_created: str | None = None
+        self.admin_name = ADMIN_NAME
+        self.admin_password: str | None = None  # into the state file, never to stdout
+        self.admin_password_created = False
         self.trains: dict[str, OnboardTrain] = {}
         self.train_sessions: dict[str, int] = {}
         self._tasks: list[asyncio.Task] = []
@@ -200,17 +200,17 @@ class System:
             raise RuntimeError(f"console could not start on port {self.settings.console_port}")
 
     def _console_admin_token(self) -> str | None:
-        """A session token for the console's admin (a new store: the first admin, its password shown once)."""
-        from augnet.console.security import ensure_admin, issue_operator_token
+        """The store's bootstrap token for the console's admin: the one in the last state file while it is
+        still valid, else rotated (a new store: the first admin, its password kept in the state file)."""
+        from augnet.console.security import bootstrap_admin
+        from augnet.console.statefile import read_state
 
-        boot = ensure_admin(self.sessions, ADMIN_NAME, self.settings.admin_password or None)
-        if boot is not None:
-            self.admin_password_created = boot.password
-            return boot.token
-        try:  # an existing store: a fresh session token for its admin, if there is one
-            return issue_operator_token(self.sessions, ADMIN_NAME)
-        except Exception:  # noqa: BLE001 - no operator of that name: log in with your own account
+        boot = bootstrap_admin(self.sessions, ADMIN_NAME, self.settings.admin_password or None,
+                               read_state(self.settings.state_path))
+        if boot is None:  # no enabled admin of that name: log in with your own account
             return None
+        self.admin_name, self.admin_password, self.admin_password_created = boot.name, boot.password, boot.created
+        return boot.token
 
     def _start_trains(self, sc: Scenario, train_rx, port: int) -> None:
         """One onboard train per simulated train receiver: its raw stream tapped from the caster, its VRS
@@ -237,13 +237,15 @@ class System:
         """Where tools find this run: the console's URL, the admin token, the caster and its train account."""
         if self.settings.state_path is None:
             return
+        from augnet.console.statefile import write_private
+
         state = {"console_url": self.console_url, "admin_token": self.admin_token,
                  "caster": {"host": LOCALHOST, "port": caster_port, "vrs_mount": VRS_MOUNT,
                             "user": self.credentials["train_user"], "password": self.credentials["train_password"]},
                  "scenario": self.settings.scenario, "pid": os.getpid()}
-        path = Path(self.settings.state_path)
-        path.write_text(json.dumps(state, indent=2))
-        path.chmod(0o600)  # credentials inside
+        if self.admin_password:
+            state.update(admin_name=self.admin_name, admin_password=self.admin_password)
+        write_private(self.settings.state_path, state)  # 0600 from the first byte: credentials inside
 
     @property
     def console_url(self) -> str | None:

@@ -37,7 +37,7 @@ class SystemSettings:
     view: bool = True
     report_path: Path | None = None
     state_path: Path | None = Path("augnet-up.json")  # where tools find the URLs and credentials
-    admin_password: str = ""  # "" -> a random one, printed once
+    admin_password: str = ""  # "" -> a random one, written to the state file (0600)
     # VRS service area (augnet/centre/service_area.py): max distance from the nearest station [km] (None:
     # the network's largest station spacing) and what a client outside gets ("refuse" or "nearest")
     service_radius_km: float | None = None

@@ -154,3 +154,38 @@ def test_page_trains_move_and_acknowledge_updates_page_and_audit(driver, sqlite_
         assert a.state is AlarmState.ACKNOWLEDGED and a.acknowledged_by == "otto"
         entry = next(e for e in q.audit_log(s) if e.action == "alarm.acknowledge")
         assert (entry.actor, entry.target) == ("otto", f"alarm:{alarm_id}")
+
+
+@pytest.mark.slow
+def test_page_from_a_bootstrap_link_obeys_its_csp_and_logout_keeps_the_token(driver, sqlite_sessions):
+    """The page opened with the state file's `#token=` link: no Content-Security-Policy violation while it
+    loads and goes live over the websocket; "Log out" revokes the page's own session token only."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    from augnet.console.security import ensure_admin
+
+    boot = ensure_admin(sqlite_sessions, "admin", "admin-password")
+    driver.execute_cdp_cmd("Page.addScriptToEvaluateOnNewDocument", {"source": (
+        "window.__csp = []; document.addEventListener('securitypolicyviolation',"
+        " e => window.__csp.push(e.violatedDirective + ' ' + e.blockedURI));")})
+    wait = WebDriverWait(driver, WAIT_S)
+    live = LiveState()
+    live.set_line(LINE)
+    with ConsoleThread(create_app(sqlite_sessions, live)) as server:
+        driver.get(f"{server.url}/#token={boot.token}")
+        wait.until(lambda d: d.find_element(By.ID, "main").is_displayed())
+        wait.until(lambda d: d.find_element(By.ID, "feed-status").text == "live")
+        assert "#token" not in driver.current_url  # dropped from the address bar
+        page_token = driver.execute_script("return sessionStorage.getItem('augnet.token');")
+        assert page_token and page_token != boot.token  # the page holds a session token of its own
+        driver.find_element(By.ID, "logout").click()
+        wait.until(lambda d: d.find_element(By.ID, "login").is_displayed())
+        assert driver.execute_script("return window.__csp;") == []
+
+        def me(token):
+            with sqlite_sessions() as s:
+                return q.operator_for_token(s, token)
+
+        WebDriverWait(driver, WAIT_S).until(lambda d: me(page_token) is None)  # the page's token revoked
+        assert me(boot.token).name == "admin"  # the bootstrap token still works

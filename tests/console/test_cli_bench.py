@@ -111,13 +111,18 @@ def test_serve_command_bootstraps_an_admin_and_serves(tmp_path):
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     url = f"sqlite:///{tmp_path / 'serve.sqlite'}"
-    proc = subprocess.Popen([sys.executable, "-m", "augnet", "console", "serve", "--db", url, "--port", str(port)],
+    state_file = tmp_path / "console.json"
+    proc = subprocess.Popen([sys.executable, "-m", "augnet", "console", "serve", "--db", url, "--port", str(port),
+                             "--state", str(state_file)],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
-        lines = [proc.stdout.readline() for _ in range(3)]
-        assert lines[0].startswith("created admin account 'admin'"), lines
-        token = lines[1].split()[-1]
-        assert lines[2].strip() == f"page: http://127.0.0.1:{port}/#token={token}"
+        lines = [proc.stdout.readline() for _ in range(2)]
+        assert lines[0].strip() == f"created admin account 'admin': password in {state_file}", lines
+        assert lines[1].strip() == f"admin token in {state_file}; open the page with http://127.0.0.1:{port}/#token=TOKEN"
+        state = json.loads(state_file.read_text())
+        assert state_file.stat().st_mode & 0o777 == 0o600
+        token, password = state["admin_token"], state["admin_password"]
+        assert token not in "".join(lines) and password not in "".join(lines)  # secrets in the file, not on stdout
         deadline = time.monotonic() + 20
         while True:
             try:

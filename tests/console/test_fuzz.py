@@ -20,7 +20,7 @@ from augnet.store.models import Severity
 from tests.console.conftest import add_accounts, empty_store
 
 EXAMPLES_PER_ROUTE = 60
-ANSWERS = {200, 201, 204, 401, 403, 404, 409, 422}
+ANSWERS = {200, 201, 204, 401, 403, 404, 409, 422, 429}  # 429: the login throttle
 
 FIELDS = ["code", "name", "lat_deg", "lon_deg", "h_m", "rtcm_station_id", "mountpoint", "enabled", "password",
           "role", "groups", "kind", "format", "read_groups", "write_groups", "x"]

@@ -87,6 +87,10 @@ def test_console_url_printed(up_run, rtkrcv_live):  # rtkrcv starts riding now
     assert up_run["state"]["console_url"] == f"http://127.0.0.1:{up_run['console_port']}/"
     log = (up_run["work"] / "up.log").read_text()
     assert f"console: http://127.0.0.1:{up_run['console_port']}/" in log
+    state = up_run["state"]  # the secrets are in the 0600 state file, not on stdout (issue 19)
+    assert state["admin_password"] not in log and state["admin_token"] not in log
+    store_files = sorted(up_run["work"].glob("augnet.db*"))  # the database, its -wal and -shm
+    assert store_files and all(f.stat().st_mode & 0o777 == 0o600 for f in [up_run["work"] / "state.json", *store_files])
 
 
 def test_console_and_caster_serve_while_it_runs(up_run):

@@ -17,7 +17,33 @@ log = logging.getLogger(__name__)
 
 # Websocket close codes 4000-4999 are the application's (RFC 6455 7.4.2); 4401/4403 mirror HTTP's.
 WS_UNAUTHORIZED = 4401
+WS_POLICY_VIOLATION = 1008  # RFC 6455 7.4.1: a message (here the handshake) violates the endpoint's policy
 MAX_EVENTS_PER_MESSAGE = 500  # a burst is sent as one message of up to this many events
+
+
+def origin_allowed(origin: str | None, host: str | None, ws_scheme: str, allowed: frozenset[str]) -> bool:
+    """May a websocket handshake with this Origin header proceed?
+
+    * no Origin: yes. Browsers always send one on a websocket handshake (RFC 6455 4.1, the Fetch standard),
+      so its absence means a non-browser client (a script, `websockets`, curl), which no foreign page can
+      drive; it still needs a valid token.
+    * the console's own origin (scheme http/https matching ws/wss, host:port equal to the Host header): yes.
+    * an origin listed in `allowed` (create_app's allowed_origins, e.g. behind a reverse proxy): yes.
+    * anything else, "null" included (sandboxed frames, file:// pages): no - cross-site websocket hijacking.
+    """
+    if origin is None:
+        return True
+    origin = origin.strip().rstrip("/").lower()
+    if origin in allowed:
+        return True
+    scheme, sep, netloc = origin.partition("://")
+    if not sep or not host:
+        return False
+    expected_scheme = "https" if ws_scheme == "wss" else "http"
+    default_port = {"http": ":80", "https": ":443"}[expected_scheme]
+    host = host.strip().lower()
+    return scheme == expected_scheme and (netloc == host or netloc + default_port == host
+                                          or netloc == host.removesuffix(default_port))
 
 
 @router.get("/live/snapshot", response_class=JSONResponse)
@@ -35,7 +61,12 @@ def _check_token(app, token: str | None):
 async def live_feed(ws: WebSocket, token: str | None = None) -> None:
     """Events as JSON messages `{"events": [...]}`; the first carries one event of type "snapshot".
     The token comes as the `token` query parameter (browsers cannot set headers on a websocket);
-    without a valid one the socket is closed with code 4401."""
+    without a valid one the socket is closed with code 4401. A handshake from a foreign browser origin
+    is refused before it is accepted (HTTP 403; see origin_allowed)."""
+    if not origin_allowed(ws.headers.get("origin"), ws.headers.get("host"), ws.url.scheme,
+                          ws.app.state.allowed_origins):
+        await ws.close(code=WS_POLICY_VIOLATION)  # before accept: uvicorn answers the handshake 403
+        return
     await ws.accept()
     who = await run_in_threadpool(_check_token, ws.app, token)
     if who is None:

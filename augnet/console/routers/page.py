@@ -26,7 +26,8 @@ async def healthz() -> dict:
 
 def _render(request: Request, caster_snapshot: dict | None) -> str:
     with request.app.state.sessions() as session:
-        return metrics.render(request.app.state.request_metrics, request.app.state.live, session, caster_snapshot)
+        return metrics.render(request.app.state.request_metrics, request.app.state.live, session, caster_snapshot,
+                              request.app.state.login_throttle.counters)
 
 
 @router.get("/metrics", tags=["meta"], response_class=Response,

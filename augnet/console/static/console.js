@@ -418,13 +418,26 @@ async function start() {
 function boot() {
   $("login-form").addEventListener("submit", login);
   $("logout").addEventListener("click", () => logout(true));
-  // `augnet up` prints a link with #token=...: take it once, then drop it from the address bar.
+  // A link with #token=... (the state file's bootstrap token): drop it from the address bar at once and
+  // trade it for a session token of the page's own, so that "Log out" never revokes the bootstrap token.
   const m = location.hash.match(/token=([^&]+)/);
-  if (m) { state.token = decodeURIComponent(m[1]); sessionStorage.setItem("augnet.token", state.token); history.replaceState(null, "", location.pathname); }
+  if (m) history.replaceState(null, "", location.pathname);
   setInterval(() => { if (state.me) refreshAlarms(); }, ALARM_REFRESH_MS);
   setInterval(() => { if (state.me) refreshStations(); }, STATIONS_REFRESH_MS);
   setInterval(() => { if (state.me) renderTrains(); }, POLL_INTERVAL_MS);  // keeps "updated s ago" honest
-  if (state.token) start(); else $("login").hidden = false;
+  if (m) adopt(decodeURIComponent(m[1]));
+  else if (state.token) start(); else $("login").hidden = false;
+}
+
+async function adopt(linkToken) {
+  try {
+    const resp = await fetch("/api/auth/session", { method: "POST", headers: { "Authorization": "Bearer " + linkToken } });
+    if (resp.status === 409) state.token = linkToken;  // a token that expires anyway: the page uses it as it is
+    else if (!resp.ok) { $("login").hidden = false; $("login-error").textContent = "the link's token is not valid"; return; }
+    else state.token = (await resp.json()).token;
+    sessionStorage.setItem("augnet.token", state.token);
+    await start();
+  } catch (e) { $("login").hidden = false; $("login-error").textContent = String(e); }
 }
 
 boot();
