@@ -180,6 +180,10 @@ class Noise(_Strict):
     geodetic_phase_m: float = Field(default=0.002, ge=0.0, le=0.05)
     train_code_m: float = Field(default=0.8, ge=0.0, le=10.0)
     train_phase_m: float = Field(default=0.004, ge=0.0, le=0.05)
+    # Code noise and multipath of the second and third signals relative to the first: real L2 P(Y) tracked
+    # semi-codelessly is noisier than C/A (catnet NetRS MP2/MP1 = 1.7-2.0 above 20 deg, GARR;
+    # docs/simulator-calibration.md). 1 = the same as the first signal.
+    second_signal_code_factor: float = Field(default=1.0, ge=0.1, le=10.0)
 
 
 class Errors(_Strict):

@@ -181,9 +181,12 @@ class World:
         grades = [r.grade for r in self.receivers]
         self.clocks = ReceiverClocks(grades, self.dt, errs.receiver_clock, rng_clock, rng_init)
         shape = (R, n, self.K)
+        code_factor = None
+        if nz.second_signal_code_factor != 1.0:
+            code_factor = np.r_[1.0, np.full(self.K - 1, nz.second_signal_code_factor)]
         self.noise = NoiseAndMultipath(shape, self.dt, self.sigma_code, self.sigma_phase,
                                        [GRADES[g]["mp_tau_s"] for g in grades], nz.enabled and nz.multipath,
-                                       rng_noise, rng_init)
+                                       rng_noise, rng_init, code_factor)
         unflagged = Unflagged(errs.phase_resets_per_hour, errs.unflagged_slips_per_hour, errs.data_gaps_per_hour,
                               self.wavelength_m)
         # their own stream: a scenario without them draws exactly what it drew before

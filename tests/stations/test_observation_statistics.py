@@ -145,4 +145,4 @@ def test_catnet_like_preset_at_least_as_harsh_as_real(real, tmp_path):
     comps = cal.compare_stations(st, real[0]) + cal.compare_pairs(pr, real[1])
     milder = [(c.statistic, c.preset, c.real) for c in comps if c.milder]
     assert not milder
-    assert len(comps) == 17
+    assert len(comps) == 18
