@@ -218,3 +218,55 @@ def calibration_report(real_dir: Path, work_dir: Path, runs=PRESET_RUNS, day_s: 
 
 def all_pairs(names):
     return list(itertools.combinations(names, 2))
+
+
+# -- the network on a simulated world, against its truth ------------------------------------------------------
+
+@dataclass
+class NetworkRun:
+    fixed_fraction: dict  # baseline -> mean fixed fraction of its DD ambiguities over the run
+    checked: int  # fixed DD ambiguity-epochs compared with the truth
+    wrong: dict  # baseline -> fixed DD ambiguity-epochs whose integers differ from the truth
+
+
+def network_against_truth(scenario, stations) -> NetworkRun:
+    """The centre's network engine on a scenario's reference `stations` (in process, first two signals), every
+    fixed DD integer against the simulator's ambiguities."""
+    from augnet.centre.network import NetworkSolver
+    from augnet.centre.observations import StationEpoch
+    from stations.world import World
+
+    world = World(scenario)
+    ids = world.receiver_ids
+    sats = np.array(world.sats)
+    col = {s: j for j, s in enumerate(world.sats)}
+    net = NetworkSolver({r.id: r.ecef[0] for r in world.receivers if r.id in stations})
+    frac: dict = {}
+    wrong: dict = {}
+    checked = 0
+    for blk in world.epochs():
+        for e in range(len(blk.t_gpst)):
+            eps = {}
+            for r in stations:
+                i = ids.index(r)
+                o = blk.observed[e, i].any(axis=1)
+                eps[r] = StationEpoch(r, float(blk.t_gpst[e]), sats[o], blk.pseudorange_m[e, i][o][:, :2],
+                                      blk.phase_cyc[e, i][o][:, :2], blk.lli[e, i][o][:, :2],
+                                      blk.cnr_dbhz[e, i][o][:, :2], world.freq_hz[o][:, :2], world.codes[o][:, :2])
+            ne = net.update(eps, world.nav)
+            for solver in net.solvers.values():
+                res = ne.baselines[solver.name]
+                if res is None:
+                    continue
+                frac.setdefault(solver.name, []).append(res.fixed_fraction)
+                k = np.flatnonzero(res.fixed & ~res.is_reference())
+                if not k.size:
+                    continue
+                ra, rb = ids.index(solver.name_a), ids.index(solver.name_b)
+                j = np.array([col[str(s)] for s in res.sats[k]])
+                jr = np.array([col[res.refs[str(s)[0]]] for s in res.sats[k]])
+                amb = blk.ambiguity_cyc[e][:, :, :2]
+                truth = (amb[rb, j] - amb[ra, j]) - (amb[rb, jr] - amb[ra, jr])
+                checked += k.size
+                wrong[solver.name] = wrong.get(solver.name, 0) + int((~(truth == res.dd_n[k]).all(axis=1)).sum())
+    return NetworkRun({k: float(np.mean(v)) for k, v in frac.items()}, checked, wrong)
