@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Optional
+from typing import List, Optional
 
 import typer
 
@@ -101,6 +101,64 @@ def record_cmd(
     typer.echo(f"{sc.name}: {summary.n_epochs} epochs x {len(summary.receivers)} receivers "
                f"({', '.join(summary.receivers)}) in {summary.seconds_wall:.1f} s = {speed:.0f}x real time")
     typer.echo(f"wrote {out}/: {', '.join(summary.files)}")
+
+
+@sim_app.command("stats")
+def stats_cmd(
+    rinex: List[Path] = typer.Argument(None, help="RINEX observation files (2 or 3), one per station"),
+    nav: Optional[Path] = typer.Option(None, "--nav", help="broadcast navigation file (elevations)"),
+    scenario: Optional[str] = typer.Option(None, "--scenario",
+                                           help="record this scenario first (to --out) and measure it"),
+    duration: Optional[float] = typer.Option(None, "--duration", help="with --scenario: seconds to simulate"),
+    rate: Optional[float] = typer.Option(None, "--rate", help="with --scenario: epochs per second"),
+    out: Path = typer.Option(Path("runs/sim-stats"), "--out", help="with --scenario: the recording folder"),
+    interval: Optional[float] = typer.Option(None, "--interval", help="decimate to this interval [s] first"),
+    systems: str = typer.Option("G", "--systems", help="satellite systems measured, e.g. G or GE"),
+) -> None:
+    """Observation statistics per station (multipath, phase noise, slips, gaps by elevation) and per pair (DD
+    ionosphere), the same code for real RINEX and for a simulated recording (stations/observation_statistics.py)."""
+    from stations import observation_statistics as ostat
+    from stations.calibration import all_pairs, load_nav, measure
+
+    files = list(rinex or [])
+    if scenario is not None:
+        from stations.record import record
+
+        sc = _load(scenario, duration, None)
+        if rate is not None:
+            sc = sc.model_copy(update=dict(rate_hz=rate))
+        record(sc.model_copy(update=dict(trains=[])), out, rtcm=False)
+        files += [out / f"{s.id}.obs" for s in sc.stations]
+        nav = nav or out / "nav.rnx"
+    if not files:
+        typer.echo("error: give RINEX files or --scenario", err=True)
+        raise typer.Exit(2)
+    try:
+        navdata = load_nav(nav) if nav is not None else None
+        series = {}
+        for f in files:
+            s = ostat.load_station(f, navdata, None if scenario is None else f.stem, tuple(systems))
+            series[s.name] = s.decimated(interval) if interval else s
+    except (OSError, ValueError) as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2)
+    st, pr = measure(series, all_pairs(list(series)))
+    typer.echo(ostat.station_table([(str(f.name), st[n]) for f, n in zip(files, series)]))
+    typer.echo("")
+    typer.echo(ostat.pair_table([("", p) for p in pr.values()]))
+    if navdata is None:
+        typer.echo("(no --nav: no elevations, so no figures by elevation and no DD ionosphere)", err=True)
+
+
+@sim_app.command("calibrate")
+def calibrate_cmd(
+    real: Path = typer.Option(..., "--real", help="the catnet-2010-077 folder (RINEX 2 + brdc0770.10n.gz)"),
+    work: Path = typer.Option(Path("runs/calibration"), "--work", help="folder for the presets' recordings"),
+) -> None:
+    """The presets beside the real network's statistics: the tables of docs/simulator-calibration.md."""
+    from stations.calibration import calibration_report
+
+    typer.echo(calibration_report(real, work, log=lambda m: typer.echo(m, err=True)))
 
 
 @stations_app.command("run")

@@ -43,12 +43,14 @@ class NoiseAndMultipath:
     """AR(1) multipath and white noise for (R, N, K), stepped one epoch at a time."""
 
     def __init__(self, shape, dt_s: float, sigma_code_m, sigma_phase_m, mp_tau_s, multipath: bool,
-                 rng: np.random.Generator, rng_init: np.random.Generator):
+                 rng: np.random.Generator, rng_init: np.random.Generator, code_signal_factor=None):
         self.rng = rng
         self.multipath = multipath
         self.phi = np.exp(-dt_s / np.asarray(mp_tau_s, float))[:, None, None]
         self.innov = np.sqrt(1 - self.phi**2)
         self.sc_code = np.asarray(sigma_code_m, float)[:, None, None]
+        if code_signal_factor is not None:  # (K,): per-signal scale of the code error (L2 noisier than L1)
+            self.sc_code = self.sc_code * np.asarray(code_signal_factor, float)[None, None, :]
         self.sc_phase = np.asarray(sigma_phase_m, float)[:, None, None]
         self.mp_code = rng_init.standard_normal(shape)  # unit-variance AR(1) states
         self.mp_phase = rng_init.standard_normal(shape)

@@ -25,7 +25,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from augnet.gnss.signals import DEFAULT_SIGNALS, SYSTEMS, UnknownSignal, by_rinex
 
-BUILTIN_SCENARIOS = ("demo", "baseline-10km", "network-70km", "iono-storm")
+BUILTIN_SCENARIOS = ("demo", "baseline-10km", "network-70km", "iono-storm", "catnet-like")
 DEFAULT_SCENARIO = "demo"
 
 
@@ -180,6 +180,10 @@ class Noise(_Strict):
     geodetic_phase_m: float = Field(default=0.002, ge=0.0, le=0.05)
     train_code_m: float = Field(default=0.8, ge=0.0, le=10.0)
     train_phase_m: float = Field(default=0.004, ge=0.0, le=0.05)
+    # Code noise and multipath of the second and third signals relative to the first: real L2 P(Y) tracked
+    # semi-codelessly is noisier than C/A (catnet NetRS MP2/MP1 = 1.7-2.0 above 20 deg, GARR;
+    # docs/simulator-calibration.md). 1 = the same as the first signal.
+    second_signal_code_factor: float = Field(default=1.0, ge=0.1, le=10.0)
 
 
 class Errors(_Strict):
@@ -190,6 +194,12 @@ class Errors(_Strict):
     receiver_clock: bool = True
     cycle_slips_per_hour: float = Field(default=0.0, ge=0.0, le=3600.0)  # per receiver-satellite
     half_cycle: bool = False  # half-cycle ambiguity at the start of each arc (flagged)
+    # What real receivers do without a flag (docs/simulator-calibration.md; per receiver-satellite and hour):
+    # the phase re-aligned to the code on every signal (Trimble NetRS at 30 s, decision 0150), integer slips
+    # with no LLI, gaps of 1-3 epochs with the phase carried through.
+    phase_resets_per_hour: float = Field(default=0.0, ge=0.0, le=3600.0)
+    unflagged_slips_per_hour: float = Field(default=0.0, ge=0.0, le=3600.0)
+    data_gaps_per_hour: float = Field(default=0.0, ge=0.0, le=3600.0)
 
 
 class Fault(_Strict):

@@ -6,14 +6,20 @@ Per (receiver, satellite, signal), one epoch at a time:
   * while tracked, a cycle slip happens with the scenario's rate (Poisson per receiver and
     satellite): an integer jump on one or more signals, flagged and with the lock time reset;
   * with `half_cycle`, a new arc starts with a half-cycle ambiguity on about half of its signals,
-    flagged (LLI bit 1) until the receiver resolves it after `HALF_CYCLE_RESOLVE_S`.
+    flagged (LLI bit 1) until the receiver resolves it after `HALF_CYCLE_RESOLVE_S`;
+  * unflagged events (`Unflagged`, default none; real receivers, docs/simulator-calibration.md): phase
+    resets (the phase re-aligned to the code on every signal, as Trimble NetRS at 30 s do 2-25 times a
+    day, decision 0150: every signal jumps by the same distance rounded to its cycles, so code minus phase
+    jumps by metres to kilometres and the geometry-free phase by under 0.25 m), cycle slips without a flag,
+    and data gaps of a few epochs with the phase carried through; no LLI, the lock time runs on. They draw
+    from their own random stream, so a scenario without them gives the same bytes as before.
 Random numbers are drawn in fixed shapes every epoch, so results do not depend on how epochs are
 grouped into blocks.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -21,6 +27,12 @@ AMBIGUITY_SPAN_CYCLES = 500  # new-arc ambiguities drawn in +-this: phase stays 
 SLIP_MAX_CYCLES = 20
 SLIP_SIGNAL_SHARE = 0.6  # chance each signal of a slipping satellite jumps (at least one does)
 HALF_CYCLE_RESOLVE_S = 6.0  # half-cycle ambiguity flagged until the receiver finds the preamble
+
+# Phase resets: the distance the phase jumps to meet the code, log-uniform between these [m] (catnet's NetRS
+# code minus phase jumps of > 20 m to kilometres, decision 0150).
+RESET_MIN_M = 20.0
+RESET_MAX_M = 5000.0
+GAP_MAX_EPOCHS = 3  # a data gap lasts 1 to this many epochs (catnet 30 s: mostly one epoch)
 
 LLI_LOSS_OF_LOCK = 1  # RINEX 3.04 5.7: bit 0
 LLI_HALF_CYCLE = 2  # bit 1
@@ -32,11 +44,27 @@ class TrackingEpoch:
     half_cycle: np.ndarray  # (R, N, K) 0 or 0.5 cycles
     lock_time_s: np.ndarray  # (R, N, K)
     lli: np.ndarray  # (R, N, K) int8 flags
+    dropped: np.ndarray | None = None  # (R, N) bool: tracked but no data this epoch (a gap)
+
+
+@dataclass(frozen=True)
+class Unflagged:
+    """Rates per receiver-satellite and hour of the events a real receiver does not flag."""
+
+    phase_resets_per_hour: float = 0.0
+    slips_per_hour: float = 0.0
+    gaps_per_hour: float = 0.0
+    wavelength_m: np.ndarray | None = field(default=None, compare=False)  # (N, K), for the resets
+
+    @property
+    def any(self) -> bool:
+        return self.phase_resets_per_hour > 0 or self.slips_per_hour > 0 or self.gaps_per_hour > 0
 
 
 class Tracking:
     def __init__(self, shape: tuple[int, int, int], dt_s: float, slips_per_hour: float, half_cycle: bool,
-                 rng: np.random.Generator):
+                 rng: np.random.Generator, unflagged: Unflagged | None = None,
+                 rng_unflagged: np.random.Generator | None = None):
         self.shape = shape
         self.dt = dt_s
         self.p_slip = slips_per_hour / 3600.0 * dt_s
@@ -46,6 +74,16 @@ class Tracking:
         self.lock_s = np.zeros(shape)
         self.amb = np.zeros(shape)
         self.half = np.zeros(shape)
+        self.unflagged = unflagged if unflagged is not None and unflagged.any else None
+        if self.unflagged is not None:
+            u = self.unflagged
+            self.rng_u = rng_unflagged
+            self.p_reset = u.phase_resets_per_hour / 3600.0 * dt_s
+            self.p_uslip = u.slips_per_hour / 3600.0 * dt_s
+            self.p_gap = u.gaps_per_hour / 3600.0 * dt_s
+            lam = u.wavelength_m if u.wavelength_m is not None else np.ones(shape[1:])
+            self.lam = np.where(np.isfinite(lam), lam, np.inf)[None]  # (1, N, K)
+            self.gap_left = np.zeros(shape[:2], int)
 
     def step(self, visible: np.ndarray) -> TrackingEpoch:
         """Advance one epoch given which (receiver, satellite) pairs can be tracked now."""
@@ -64,9 +102,32 @@ class Tracking:
         self.amb = np.where(new_arc[..., None], draw_amb, self.amb + jump)
         reset = new_arc[..., None] | (jump != 0)
         self.lock_s = np.where(reset, 0.0, self.lock_s + self.dt)
+        dropped = None
+        if self.unflagged is not None:
+            dropped = self._unflagged(visible, new_arc, slip, draw_jump, draw_jump_on)
         if self.half_cycle_on:
             self.half = np.where(new_arc[..., None], np.where(draw_half, 0.5, 0.0), self.half)
             self.half = np.where(self.lock_s >= HALF_CYCLE_RESOLVE_S, 0.0, self.half)
         self.tracking = visible
         lli = (reset * LLI_LOSS_OF_LOCK | (self.half != 0) * LLI_HALF_CYCLE).astype(np.int8)
-        return TrackingEpoch(self.amb, self.half, self.lock_s, lli)
+        return TrackingEpoch(self.amb, self.half, self.lock_s, lli, dropped)
+
+    def _unflagged(self, visible, new_arc, slip, draw_jump, draw_jump_on):
+        """Phase resets, unflagged slips and gaps on the arcs that carry on this epoch; the dropped mask."""
+        R, N, K = self.shape
+        rng = self.rng_u
+        u = rng.random((3, R, N))
+        dist = np.exp(rng.uniform(np.log(RESET_MIN_M), np.log(RESET_MAX_M), (R, N))) * rng.choice([-1, 1], (R, N))
+        gap_len = rng.integers(1, GAP_MAX_EPOCHS + 1, (R, N))
+        going = visible & ~new_arc & ~slip
+        resets = going & (u[0] < self.p_reset)
+        # every signal moves by the same distance, in whole cycles of its own wavelength
+        d_reset = np.where(resets[..., None] & np.isfinite(self.lam), np.round(dist[..., None] / self.lam), 0.0)
+        uslip = going & ~resets & (u[1] < self.p_uslip)
+        jump = np.where(uslip[..., None] & draw_jump_on, draw_jump, 0)
+        jump[..., 0] = np.where(uslip & ~(jump != 0).any(-1), draw_jump[..., 0], jump[..., 0])
+        self.amb = self.amb + d_reset + jump
+        self.gap_left = np.where(visible, np.maximum(self.gap_left - 1, 0), 0)
+        start = going & (self.gap_left == 0) & (u[2] < self.p_gap)
+        self.gap_left = np.where(start, gap_len, self.gap_left)
+        return self.gap_left > 0

@@ -39,7 +39,7 @@ from stations.orbit_errors import OrbitClockErrors
 from stations.receiver_errors import GRADES, NoiseAndMultipath, ReceiverClocks, cnr_dbhz, elevation_scale
 from stations.scenario import Scenario, resolve_ionosphere
 from stations.track import TrackLine, check_on_line, cutting_mask_rad
-from stations.tracking import Tracking
+from stations.tracking import Tracking, Unflagged
 from stations.troposphere import WetResidualField, niell, zenith_delays_m
 
 TRANSIT_ITERATIONS = 3  # each iteration shrinks the transit-time error by v_sat/c ~ 1e-5
@@ -181,10 +181,18 @@ class World:
         grades = [r.grade for r in self.receivers]
         self.clocks = ReceiverClocks(grades, self.dt, errs.receiver_clock, rng_clock, rng_init)
         shape = (R, n, self.K)
+        code_factor = None
+        if nz.second_signal_code_factor != 1.0:
+            code_factor = np.r_[1.0, np.full(self.K - 1, nz.second_signal_code_factor)]
         self.noise = NoiseAndMultipath(shape, self.dt, self.sigma_code, self.sigma_phase,
                                        [GRADES[g]["mp_tau_s"] for g in grades], nz.enabled and nz.multipath,
-                                       rng_noise, rng_init)
-        self.tracking = Tracking(shape, self.dt, errs.cycle_slips_per_hour, errs.half_cycle, rng_track)
+                                       rng_noise, rng_init, code_factor)
+        unflagged = Unflagged(errs.phase_resets_per_hour, errs.unflagged_slips_per_hour, errs.data_gaps_per_hour,
+                              self.wavelength_m)
+        # their own stream: a scenario without them draws exactly what it drew before
+        rng_unflagged = np.random.default_rng([sc.seed, 0x0F1A]) if unflagged.any else None
+        self.tracking = Tracking(shape, self.dt, errs.cycle_slips_per_hour, errs.half_cycle, rng_track,
+                                 unflagged, rng_unflagged)
         self._next_epoch = 0
 
     # -- set-up ---------------------------------------------------------------------------------
@@ -383,6 +391,8 @@ class World:
             mp_c, mp_p, n_c, n_p, z_dop = self.noise.step(el_scale[e])
             trk = self.tracking.step(visible[e])
             obs = visible[e][..., None] & self.signal_exists[None]
+            if trk.dropped is not None:
+                obs = obs & ~trk.dropped[..., None]
             ge = geo[e][..., None]
             P[e] = np.where(obs, ge + iono[e] + group[e] + mp_c + n_c, np.nan)
             L[e] = np.where(obs, (ge - iono[e] + mp_p + n_p) / lam + trk.ambiguity_cyc + trk.half_cycle, np.nan)

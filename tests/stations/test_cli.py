@@ -80,3 +80,20 @@ def test_km_beyond_the_line_refused(tmp_path):
     res = runner.invoke(sim_app, ["record", str(p), "--duration", "2", "--out", str(tmp_path / "o")])
     assert res.exit_code == 2
     assert "trains.0.start_km = 500.0: beyond the end of the line (0 to 222.2" in res.output
+
+
+@pytest.mark.slow
+def test_stats_of_a_recorded_scenario(tmp_path):
+    """`sim stats --scenario` records, then prints the station and pair tables measured on its RINEX."""
+    res = runner.invoke(sim_app, ["stats", "--scenario", "baseline-10km", "--duration", "900", "--rate", "0.2",
+                                  "--out", str(tmp_path / "rec")])
+    assert res.exit_code == 0, res.output
+    rows = [line for line in res.output.splitlines() if line.startswith("| ")]
+    assert any("| A |" in r for r in rows) and any("| B |" in r for r in rows)
+    pair = next(r for r in rows if "| A-B |" in r)
+    assert "| 10.0 | 5 |" in pair  # 10 km, 5 s
+
+
+def test_stats_refuses_nothing_to_measure():
+    res = runner.invoke(sim_app, ["stats"])
+    assert res.exit_code == 2 and "--scenario" in res.output

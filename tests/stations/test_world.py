@@ -334,3 +334,35 @@ def test_cutting_hides_low_satellites_across_the_track():
     high = el > np.radians(40)
     assert seen[inside][high[inside]].all()  # the sky overhead stays open
     assert seen[~inside][(low & across)[~inside]].any()  # outside the cutting they are seen
+
+
+def test_unflagged_resets_slips_and_gaps():
+    """Phase resets move every signal by the same distance (geometry-free jump < 0.25 m, code minus phase by
+    metres to kilometres), unflagged slips jump by whole cycles, gaps drop epochs; none carries a flag."""
+    sc = _scenario(duration=200, phase_resets_per_hour=90.0, unflagged_slips_per_hour=30.0,
+                   data_gaps_per_hour=90.0)
+    w, bl = _run(sc)
+    amb, lli, obs = _cat(bl, "ambiguity_cyc"), _cat(bl, "lli"), _cat(bl, "observed")
+    both = ~np.isnan(amb[1:]) & ~np.isnan(amb[:-1])
+    jumped = both & (amb[1:] != amb[:-1])
+    assert jumped.sum() > 20
+    assert not np.any(lli[1:][jumped] & 1)
+    lam = w.wavelength_m
+    d_m = (amb[1:] - amb[:-1]) * lam[None, None]  # (E-1, R, N, K) phase jump [m]
+    sat_jump = jumped.any(-1)
+    gf = np.abs(d_m[..., 0] - d_m[..., 1])[sat_jump]
+    big = np.abs(d_m[..., 0])[sat_jump] >= 19.0  # the resets (20 m to 5 km)
+    assert big.sum() > 10 and np.all(gf[big] < 0.25)
+    # gaps: a satellite missing for 1-3 epochs inside its arc, back without a flag
+    seen = obs[..., 0]
+    back = seen[2:] & ~seen[1:-1] & seen[:-2]
+    assert back.sum() > 3
+    assert not np.any(lli[2:, ..., 0][back] & 1)
+
+
+def test_unflagged_events_draw_apart_from_everything_else():
+    """Their own random stream: switched on, the code (noise, multipath) is what it was; only the phase moves."""
+    plain = _run(_scenario(duration=60))[1]
+    resets = _run(_scenario(duration=60, phase_resets_per_hour=120.0))[1]
+    assert np.array_equal(_cat(plain, "pseudorange_m"), _cat(resets, "pseudorange_m"), equal_nan=True)
+    assert not np.array_equal(_cat(plain, "phase_cyc"), _cat(resets, "phase_cyc"), equal_nan=True)
