@@ -42,6 +42,11 @@ class Authenticator:
         self._lock = threading.Lock()  # checks run in worker threads, lookups on the event loop
         self.checks = 0  # scrypt verifications run (the expensive path)
 
+    def credential_key(self, user: str, password: str) -> bytes:
+        """An HMAC of the credentials (never the password itself): the cache's key, and the caster's for
+        verifications in flight."""
+        return self._cache_key(user, password)
+
     def _cache_key(self, user: str, password: str) -> bytes:
         return hmac.new(self._key, f"{user}\0{password}".encode("utf-8", "surrogatepass"),
                         hashlib.sha256).digest()

@@ -65,6 +65,9 @@ class Limits:
     max_clients: int = L.MAX_CLIENTS
     max_clients_per_mount: int = L.MAX_CLIENTS_PER_MOUNT
     max_clients_per_ip: int = L.MAX_CLIENTS_PER_IP
+    max_pending_per_ip: int = L.MAX_PENDING_PER_IP
+    auth_workers: int = L.AUTH_WORKERS
+    auth_queue_max: int = L.AUTH_QUEUE_MAX
     gga_min_interval_s: float = L.GGA_MIN_INTERVAL_S
     reposition_min_interval_s: float = L.REPOSITION_MIN_INTERVAL_S
     reposition_max_interval_s: float = L.REPOSITION_MAX_INTERVAL_S

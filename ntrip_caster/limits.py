@@ -63,6 +63,20 @@ BASE_SWITCH_HYSTERESIS_M = 500.0
 MAX_CLIENTS = 20_000
 MAX_CLIENTS_PER_MOUNT = 20_000
 MAX_CLIENTS_PER_IP = 0
+# Connections per address that are not yet a client or a source (request head or credentials pending).
+# An NTRIP client sends its request at once and waits a few ms for the answer, so even 100 trains behind
+# one carrier NAT starting together stay far below this; a flood of half-open guesses does not (issue 19).
+MAX_PENDING_PER_IP = 256
+
+# --- password verification (issue 19) -----------------------------------------------------------
+# Threads that run scrypt, the caster's own pool (never the loop's default executor, which other parts
+# of a process may use): the 2-core deployment gives one core at most to hashing.
+AUTH_WORKERS = 1
+# Verifications queued or running beyond which a new one is refused at once with 503 and Retry-After:
+# at ~30 ms per scrypt (N=2^14) this bounds the wait to ~2 s, and a queue never grows without end.
+AUTH_QUEUE_MAX = 64
+# Retry-After [s] of that 503.
+AUTH_BUSY_RETRY_S = 2
 # Mountpoints unknown sources may create when the caster accepts them (open test casters): each
 # holds a table entry and statistics, so a hostile uploader must not create them without end.
 MAX_AUTO_MOUNTS = 1000

@@ -17,6 +17,9 @@ V1_STREAM_OK = b"ICY 200 OK\r\n"
 V1_SOURCE_OK = b"ICY 200 OK\r\n"
 V1_SOURCE_BAD_PASSWORD = b"ERROR - Bad Password\r\n"
 V1_SOURCE_MOUNT_TAKEN = b"ERROR - Mount Point Taken or Invalid\r\n"
+# Throttled or busy: no NTRIP 1 source reply exists for these; BKG's caster style, read as a refusal.
+V1_SOURCE_TOO_MANY = b"ERROR - Too many attempts\r\n"
+V1_SOURCE_BUSY = b"ERROR - Server busy\r\n"
 
 
 def http_date() -> str:
@@ -83,11 +86,14 @@ def sourcetable_response(version: int, body: bytes) -> bytes:
 
 
 def error_response(version: int, status: int, message: str = "", *, realm: str = DEFAULT_REALM,
-                   source_v1: bool = False) -> bytes:
+                   source_v1: bool = False, retry_after: int | None = None) -> bytes:
     """An error reply. v1 sources get the `ERROR - ...` lines RTKLIB and BKG's server expect;
-    v1 clients an HTTP/1.0 status; v2 peers an HTTP/1.1 status with Ntrip-Version."""
+    v1 clients an HTTP/1.0 status; v2 peers an HTTP/1.1 status with Ntrip-Version.
+    `retry_after` [s] adds Retry-After (429, 503; RFC 9110 10.2.3) where the reply is HTTP."""
     if source_v1:
-        return V1_SOURCE_BAD_PASSWORD if status == 401 else V1_SOURCE_MOUNT_TAKEN
+        if status == 503 and retry_after is not None:  # busy for now (a full caster stays "taken")
+            return V1_SOURCE_BUSY
+        return {401: V1_SOURCE_BAD_PASSWORD, 429: V1_SOURCE_TOO_MANY}.get(status, V1_SOURCE_MOUNT_TAKEN)
     body = (message or _reason(status)).replace("\r", " ").replace("\n", " ").encode("utf-8") + b"\r\n"
     headers: list[tuple[str, str]] = []
     if version == 2:
@@ -95,6 +101,8 @@ def error_response(version: int, status: int, message: str = "", *, realm: str =
     headers += [("Server", SERVER_NAME), ("Date", http_date())]
     if status == 401:
         headers.append(("WWW-Authenticate", f'Basic realm="{realm}"'))
+    if retry_after is not None:
+        headers.append(("Retry-After", str(int(retry_after))))
     headers += [("Connection", "close"), ("Content-Type", "text/plain"),
                 ("Content-Length", str(len(body)))]
     first = f"{'HTTP/1.1' if version == 2 else 'HTTP/1.0'} {status} {_reason(status)}"

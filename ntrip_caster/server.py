@@ -20,6 +20,7 @@ import os
 import socket
 import time
 from collections import Counter
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 from typing import Any, Callable
 
@@ -37,6 +38,8 @@ from .request import NtripRequest
 from .response import error_response, json_response, source_ok, sourcetable_response, stream_ok
 from .sourcetable import CasRecord, StrRecord, filter_records, render_sourcetable
 from .stream_factory import StreamFactory, StreamHandle, StreamRefused, load_factory
+from .limits import AUTH_BUSY_RETRY_S
+from .throttle import AuthThrottle, FloodAlarm
 
 log = logging.getLogger("ntrip_caster")
 
@@ -49,6 +52,8 @@ LISTEN_BACKLOG = 4096
 # per-client list). A leading underscore cannot clash with a station name in practice; the
 # configuration refuses a mountpoint of that name.
 STATS_PATH = "_stats"
+# The alarm raised through `Caster.on_alarm` when failed or refused authentications pass the threshold.
+AUTH_FLOOD_ALARM = "ntrip-auth-flood"
 
 
 class SourceSession:
@@ -221,7 +226,7 @@ class CasterProtocol(asyncio.Protocol):
     """One TCP connection: feeds the sans-IO core and routes its events to the caster."""
 
     __slots__ = ("caster", "transport", "conn", "peer_ip", "client", "mount", "head_timer",
-                 "pending", "closed", "upload_window", "upload_bytes")
+                 "pending", "closed", "upload_window", "upload_bytes", "pending_slot")
 
     def __init__(self, caster: "Caster") -> None:
         self.caster = caster
@@ -236,6 +241,7 @@ class CasterProtocol(asyncio.Protocol):
         self.closed = False
         self.upload_window = 0.0
         self.upload_bytes = 0
+        self.pending_slot = False  # counted in caster.pending_per_ip (not yet a client or a source)
 
     # --- asyncio callbacks ---------------------------------------------------------------------
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
@@ -249,6 +255,16 @@ class CasterProtocol(asyncio.Protocol):
             except (OSError, AttributeError):  # uvloop's pseudo-socket; uvloop sets NODELAY itself
                 pass
         self.caster._conns.add(self)
+        pending = self.caster.pending_per_ip
+        limit = self.caster.limits.max_pending_per_ip
+        if limit and pending[self.peer_ip] >= limit:  # no request read yet: answer in HTTP/1.0, as v1 does
+            self.caster.counters["refused_pending_per_ip"] += 1
+            self.transport.write(error_response(1, 503, "too many connections from this address",
+                                                retry_after=self.caster.limits.request_head_timeout_s))
+            self.close()
+            return
+        pending[self.peer_ip] += 1
+        self.pending_slot = True
         self.head_timer = self.caster.loop.call_later(
             self.caster.limits.request_head_timeout_s, self._head_timeout)
 
@@ -288,6 +304,7 @@ class CasterProtocol(asyncio.Protocol):
         if self.head_timer is not None:
             self.head_timer.cancel()
         self.caster._conns.discard(self)
+        self.release_pending()
         if self.client is not None:
             self.caster.remove_client(self.client)
         if self.mount is not None:
@@ -331,15 +348,23 @@ class CasterProtocol(asyncio.Protocol):
             self.caster.counters["head_timeouts"] += 1
             self.reject(408, "request head not received in time")
 
-    def reject(self, status: int, reason: str) -> None:
+    def release_pending(self) -> None:
+        if self.pending_slot:
+            self.pending_slot = False
+            pending = self.caster.pending_per_ip
+            pending[self.peer_ip] -= 1
+            if pending[self.peer_ip] <= 0:
+                del pending[self.peer_ip]
+
+    def reject(self, status: int, reason: str, retry_after: int | None = None) -> None:
         """Answer an error in the peer's dialect and close."""
         req = self.conn.request
         version = req.version if req is not None else 1
         source_v1 = req is not None and req.kind == "source" and req.version == 1
         self.caster.counters[f"status_{status}"] += 1
         if not self.closed:
-            self.transport.write(error_response(version, status, reason,
-                                                realm=self.caster.config.realm, source_v1=source_v1))
+            self.transport.write(error_response(version, status, reason, realm=self.caster.config.realm,
+                                                source_v1=source_v1, retry_after=retry_after))
         self.close()
 
     def close(self) -> None:
@@ -367,6 +392,17 @@ class Caster:
         self.loop: asyncio.AbstractEventLoop = None  # type: ignore[assignment]
         self.started_at = 0.0
         self.port = config.port
+        self.pending_per_ip: Counter[str] = Counter()
+        # Password verification: a pool of its own (never the loop's default executor), a bounded queue,
+        # identical credentials verified once, failures throttled per address and name (issue 19).
+        self.auth_pool = ThreadPoolExecutor(max(1, self.limits.auth_workers), thread_name_prefix="ntrip-auth")
+        self.auth_queued = 0  # verifications submitted and not finished
+        self._verifying: dict[bytes, asyncio.Future] = {}
+        self.throttle = AuthThrottle()
+        self.flood_alarm = FloodAlarm()
+        self.clock: Callable[[], float] = time.monotonic  # the throttle's clock; tests step it
+        # on_alarm(kind, subject, severity, message, cleared): `augnet up` passes its alarm path.
+        self.on_alarm: Callable[[str, str, str, str, bool], None] | None = None
         factories = dict(factories or {})
         for m in config.mounts:
             factory = None
@@ -419,6 +455,7 @@ class Caster:
             p.transport.abort()
         if self._server is not None:
             await self._server.wait_closed()
+        self.auth_pool.shutdown(wait=False, cancel_futures=True)
         if self.config.stats_path:
             self._write_stats()
 
@@ -427,6 +464,8 @@ class Caster:
         while True:
             await asyncio.sleep(HOUSEKEEPING_INTERVAL_S)
             now = time.monotonic()
+            if self.flood_alarm.tick(self.clock()):
+                self._raise_alarm(True)
             for m in self.mounts.values():
                 src = m.source
                 if src is not None and now - src.last_data_at > self.limits.source_idle_timeout_s:
@@ -458,31 +497,100 @@ class Caster:
         return self._client_request(proto, req)
 
     def _authenticate(self, req: NtripRequest, groups: frozenset[str],
-                      then: Callable[[str | None], None], *, source_password: bool = False
-                      ) -> asyncio.Future | None:
+                      then: Callable[[str | None], None], *, source_password: bool = False,
+                      proto: CasterProtocol | None = None) -> asyncio.Future | None:
         """Call `then(user or None)`; synchronously when the answer is cheap, else after scrypt
-        ran in a worker thread (returns that future)."""
+        ran on the verification pool (returns that future). A throttled or busy attempt is answered
+        429 / 503 on `proto` here and `then` is not called."""
         if PUBLIC in groups:
             # No check needed to read; name the user only if these credentials were verified
             # before (an unverified name must not appear in the statistics).
             then(self.auth.cached_user(req.user, req.password))
             return None
-        if source_password:
-            fut = self.loop.run_in_executor(None, self.auth.check_source_password,
-                                            req.password or "", groups)
-        else:
+        if not source_password and req.user is None:
+            then(None)  # no credentials: 401 without any hash
+            return None
+        assert proto is not None
+        address = proto.peer_ip
+        name = f"\0source/{req.mount}" if source_password else (req.user or "")
+        now = self.clock()
+        wait = self.throttle.admit(address, name, now)
+        if wait:
+            self.counters["auth_refused_throttled"] += 1
+            self._note_bad_auth(now)
+            proto.reject(429, "too many failed attempts", retry_after=wait)
+            return None
+        if not source_password:
             cached = self.auth.cached_user(req.user, req.password)
-            if cached is not None or req.user is None:
+            if cached is not None:
+                self.throttle.succeeded(address, name, now)
                 then(cached)
                 return None
-            fut = self.loop.run_in_executor(None, self.auth.check, req.user, req.password)
+            key = self.auth.credential_key(req.user or "", req.password or "")
+            fut = self._verifying.get(key)  # the same credentials already being verified: share it
+            if fut is None:
+                fut = self._verify(key, self.auth.check, req.user, req.password)
+            else:
+                self.counters["auth_coalesced"] += 1
+        else:
+            fut = self._verify(None, self.auth.check_source_password, req.password or "", groups)
+        if fut is None:  # pool full
+            self.throttle.abandon(address, name)
+            self.counters["auth_refused_busy"] += 1
+            self._note_bad_auth(now)
+            proto.reject(503, "authentication busy", retry_after=AUTH_BUSY_RETRY_S)
+            return None
 
         def done(f: asyncio.Future) -> None:
             ok = not f.cancelled() and f.exception() is None
-            then(f.result() if ok else None)
+            user = f.result() if ok else None
+            t = self.clock()
+            if not ok:
+                self.throttle.abandon(address, name)
+            elif user is None:
+                self.throttle.failed(address, name, t)
+                self.counters["auth_failed"] += 1
+                self._note_bad_auth(t)
+            else:
+                self.throttle.succeeded(address, name, t)
+                self.counters["auth_succeeded"] += 1
+            then(user)
 
         fut.add_done_callback(done)
         return fut
+
+    def _verify(self, key: bytes | None, fn: Callable[..., str | None], *args: Any) -> asyncio.Future | None:
+        """Run `fn(*args)` on the verification pool, or None when its queue is full."""
+        if self.auth_queued >= self.limits.auth_queue_max:
+            return None
+        self.auth_queued += 1
+        fut = asyncio.wrap_future(self.auth_pool.submit(fn, *args), loop=self.loop)
+
+        def finished(_f: asyncio.Future) -> None:
+            self.auth_queued -= 1
+            if key is not None:
+                self._verifying.pop(key, None)
+
+        fut.add_done_callback(finished)
+        if key is not None:
+            self._verifying[key] = fut
+        return fut
+
+    def _note_bad_auth(self, now: float) -> None:
+        if self.flood_alarm.note(now):
+            self._raise_alarm(False)
+
+    def _raise_alarm(self, cleared: bool) -> None:
+        c = self.counters
+        msg = (f"{self.flood_alarm.threshold}+ failed or refused NTRIP logins in "
+               f"{self.flood_alarm.window_s:.0f} s (failed {c['auth_failed']}, throttled "
+               f"{c['auth_refused_throttled']}, busy {c['auth_refused_busy']})")
+        (log.info if cleared else log.warning)("%s %s", "cleared:" if cleared else "alarm:", msg)
+        if self.on_alarm is not None:
+            try:
+                self.on_alarm(AUTH_FLOOD_ALARM, "caster", "warning", msg, cleared)
+            except Exception:  # the alarm path's bug must not cost the request
+                log.exception("caster alarm callback failed")
 
     def sourcetable(self, query: str = "") -> bytes:
         records: list = [CasRecord(self.config.host, self.port, self.config.identifier,
@@ -523,7 +631,7 @@ class Caster:
                 return
             self._admit_client(proto, req, mount, user)
 
-        return self._authenticate(req, mount.cfg.read, decided)
+        return self._authenticate(req, mount.cfg.read, decided, proto=proto)
 
     def _stats_request(self, proto: CasterProtocol, req: NtripRequest) -> asyncio.Future | None:
         """`GET /_stats` by a user of the admin group: the statistics snapshot as JSON."""
@@ -540,7 +648,7 @@ class Caster:
             proto.transport.write(json_response(body))
             proto.close()
 
-        return self._authenticate(req, group, decided)
+        return self._authenticate(req, group, decided, proto=proto)
 
     def _admit_client(self, proto: CasterProtocol, req: NtripRequest, mount: Mountpoint,
                       user: str | None) -> None:
@@ -557,6 +665,7 @@ class Caster:
             return
         s = ClientSession(self, proto, mount, req.version, user)
         proto.client = s
+        proto.release_pending()
         if lim.client_send_buffer_bytes:
             sock = proto.transport.get_extra_info("socket")
             if sock is not None:
@@ -608,11 +717,12 @@ class Caster:
             mount.source_sessions += 1
             mount.aligner = RtcmFrameAligner()
             proto.mount = mount
+            proto.release_pending()
             proto.transport.write(source_ok(req.version))
             log.info("source on %s from %s (%s)", mount.name, proto.peer_ip, req.user_agent)
 
         v1_password = req.version == 1 and req.user is None
-        return self._authenticate(req, mount.cfg.write, decided, source_password=v1_password)
+        return self._authenticate(req, mount.cfg.write, decided, source_password=v1_password, proto=proto)
 
     # --- streams ---------------------------------------------------------------------------------
     def on_source_data(self, mount: Mountpoint, data: bytes) -> None:
@@ -749,6 +859,7 @@ class Caster:
             "started_at": self.started_at, "now": time.time(), "port": self.port,
             "clients_now": len(self.clients), "connections_now": len(self._conns),
             "counters": dict(self.counters), "auth_checks": self.auth.checks,
+            "auth_queued": self.auth_queued, "auth_alarm": self.flood_alarm.raised,
             "mounts": {name: m.stats() for name, m in self.mounts.items()},
             "clients": [s.stats() for s in self.clients.values()] if clients else [],
         }
