@@ -147,6 +147,7 @@ class System:
         centre; returns its port."""
         cfg = caster_config(self.settings, sc, stations, train_rx, hashes)
         self.caster = Caster(cfg, {VRS_MOUNT: self.centre})
+        self.caster.on_alarm = self._alarm  # a bad-password flood is an operator's alarm (issue 19)
         port = await self.caster.start()
         for rx in stations:
             self.caster.tap(rx.id, lambda data, code=rx.id: self.centre.feed(code, data))
