@@ -33,12 +33,12 @@ from .config import CasterConfig, MountConfig
 from .connection import (GgaLine, NtripServerConnection, RequestReceived, SourceData,
                          SourceFinished)
 from .gga import GgaFix, parse_gga
+from .limits import AUTH_BUSY_RETRY_S
 from .reposition import RepositionPolicy, choose_base
 from .request import NtripRequest
 from .response import error_response, json_response, source_ok, sourcetable_response, stream_ok
 from .sourcetable import CasRecord, StrRecord, filter_records, render_sourcetable
 from .stream_factory import StreamFactory, StreamHandle, StreamRefused, load_factory
-from .limits import AUTH_BUSY_RETRY_S
 from .throttle import AuthThrottle, FloodAlarm
 
 log = logging.getLogger("ntrip_caster")
@@ -514,7 +514,9 @@ class Caster:
         address = proto.peer_ip
         name = f"\0source/{req.mount}" if source_password else (req.user or "")
         now = self.clock()
-        wait = self.throttle.admit(address, name, now)
+        key = None if source_password else self.auth.credential_key(req.user or "", req.password or "")
+        running = self._verifying.get(key) if key is not None else None  # same credentials being verified
+        wait = self.throttle.admit(address, name, now, shared=running is not None)
         if wait:
             self.counters["auth_refused_throttled"] += 1
             self._note_bad_auth(now)
@@ -526,8 +528,7 @@ class Caster:
                 self.throttle.succeeded(address, name, now)
                 then(cached)
                 return None
-            key = self.auth.credential_key(req.user or "", req.password or "")
-            fut = self._verifying.get(key)  # the same credentials already being verified: share it
+            fut = running
             if fut is None:
                 fut = self._verify(key, self.auth.check, req.user, req.password)
             else:

@@ -69,10 +69,10 @@ class AuthThrottle:
         return st
 
     @staticmethod
-    def _wait(st: _KeyState, now: float) -> int:
+    def _wait(st: _KeyState, now: float, shared: bool = False) -> int:
         if st.locked_until > now:
             return max(1, int(-(-(st.locked_until - now) // 1)))  # whole seconds, rounded up (RFC 9110 10.2.3)
-        if st.trusted:
+        if shared or st.trusted:
             allowed = MAX_IN_FLIGHT_TRUSTED
         else:
             allowed = FREE_FAILURES - st.failures if st.failures < FREE_FAILURES else 1
@@ -85,10 +85,12 @@ class AuthThrottle:
             states.append(self._state(("user", name), now))
         return states
 
-    def admit(self, address: str, name: str, now: float) -> int:
-        """0: verify now (the attempt is in flight until its outcome is reported); else Retry-After [s]."""
+    def admit(self, address: str, name: str, now: float, shared: bool = False) -> int:
+        """0: verify now (the attempt is in flight until its outcome is reported); else Retry-After [s].
+        `shared`: the attempt joins a verification of the same credentials already running (no hash of its
+        own), so only a lock refuses it, not the in-flight cap: a fleet starting together is not throttled."""
         states = self._keys_of(address, name, now)
-        wait = max(self._wait(st, now) for st in states)
+        wait = max(self._wait(st, now, shared) for st in states)
         if not wait:
             for st in states:
                 st.in_flight += 1

@@ -238,3 +238,25 @@ def test_pending_connections_per_address_are_bounded():
                 s.close()
             src.close()
         assert ct.snapshot(clients=False)["counters"]["refused_pending_per_ip"] >= 1
+
+
+def test_joining_a_running_verification_skips_the_in_flight_cap_but_not_a_lock():
+    th = AuthThrottle()
+    assert sum(th.admit("nat", "train", 0.0, shared=True) == 0 for _ in range(100)) == 100
+    locked = AuthThrottle()
+    for now in [0.0] * FREE_FAILURES:
+        locked.admit("nat", "train", now)
+        locked.failed("nat", "train", now)
+    assert locked.admit("nat", "train", 0.5, shared=True) == 1
+
+
+def test_a_fleet_starting_together_behind_one_address_is_served_with_one_hash():
+    with CasterThread(make_config()) as ct:
+        src = open_v1_source(ct.port, "BASE01", STATION_PW)
+        before = ct.snapshot(clients=False)["auth_checks"]
+        with ThreadPoolExecutor(50) as pool:  # cold cache, one address, one name, one password
+            statuses = list(pool.map(lambda _: _status(_request(ct.port, "train1", TRAIN_PW)), range(50)))
+        checks = ct.snapshot(clients=False)["auth_checks"] - before
+        src.close()
+    assert statuses == [200] * 50
+    assert checks == 1
