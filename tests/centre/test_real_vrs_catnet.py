@@ -36,6 +36,7 @@ from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
 from augnet.gnss.geometry import ecef_to_enu
 from augnet.gnss.rinex import read_obs
 from tests.conftest import require_tool
+from tests.rtklib_pos import read_pos
 
 pytestmark = [pytest.mark.slow, pytest.mark.shared_data, pytest.mark.rtklib]
 
@@ -80,18 +81,6 @@ STATIC_SAAS = (KINEMATIC.replace("=kinematic", "=static").replace("=continuous",
 STATIC = STATIC_SAAS.replace("=saas", "=est-ztd")
 
 
-def _read_pos(path):
-    t, xyz, q = [], [], []
-    for line in open(path):
-        if line.startswith("%") or not line.strip():
-            continue
-        f = line.split()
-        t.append(float(f[1]))
-        xyz.append([float(v) for v in f[2:5]])
-        q.append(int(f[5]))
-    return np.array(t), np.array(xyz).reshape(-1, 3), np.array(q, dtype=int)
-
-
 def _rnx2rtkp(exe, conf_text, d, name, rover, base, nav, span=()):
     """rnx2rtkp with the settings `conf_text`; `span` ("HH:MM", "HH:MM") limits it to that part of the day."""
     conf = d / f"{name}.conf"
@@ -100,7 +89,7 @@ def _rnx2rtkp(exe, conf_text, d, name, rover, base, nav, span=()):
     times = ["-ts", DAY, f"{span[0]}:00", "-te", DAY, f"{span[1]}:00"] if span else []
     subprocess.run([exe, "-k", str(conf), *times, "-o", str(out), str(rover), str(base), str(nav)], check=True,
                    capture_output=True, timeout=300)
-    return _read_pos(out)
+    return read_pos(out)
 
 
 def _static_truth(exe, d, rover, base, nav, conf=STATIC, tag="ztd"):

@@ -54,6 +54,7 @@ from augnet.gnss.rinex import read_obs
 from stations.record import record
 from stations.scenario import load_scenario
 from tests.conftest import require_tool
+from tests.rtklib_pos import read_pos
 
 NL = "rinex/nl-network-2021"
 # 15 min at 2 s: 450 network epochs at ~0.05-0.15 s CPU each (4 baselines, depending on the load of the shared
@@ -96,24 +97,6 @@ CONFIG_VRS = (CONFIG.replace("pos2-armode        =continuous", "pos2-armode     
 CONFIGS = {"CONFIG": CONFIG, "CONFIG_VRS": CONFIG_VRS}
 
 
-def _read_pos(path):
-    """rnx2rtkp xyz output (`-e` / out-solformat=xyz), times as week/TOW or date and time of day:
-    (seconds (E,), xyz (E, 3), Q (E,))."""
-    t, xyz, q = [], [], []
-    for line in open(path):
-        if line.startswith("%") or not line.strip():
-            continue
-        f = line.split()
-        if ":" in f[1]:
-            h, m, sec = f[1].split(":")
-            t.append(int(h) * 3600 + int(m) * 60 + float(sec))
-        else:
-            t.append(float(f[1]))
-        xyz.append([float(v) for v in f[2:5]])
-        q.append(int(f[5]))
-    return np.array(t), np.array(xyz).reshape(-1, 3), np.array(q, dtype=int)
-
-
 def _truth(path, rx):
     for row in csv.DictReader(open(path)):
         if row["receiver"] == rx:
@@ -123,7 +106,7 @@ def _truth(path, rx):
 
 def _rtk_figures(pos_path, truth_xyz):
     """Fix rate after the first fix, horizontal errors, wrong fixes, against the truth."""
-    t, xyz, q = _read_pos(pos_path)
+    t, xyz, q = read_pos(pos_path)
     enu = ecef_to_enu(xyz - truth_xyz, truth_xyz)
     h = np.hypot(enu[:, 0], enu[:, 1])
     fixed = q == FIX_Q
@@ -228,7 +211,7 @@ def test_rtklib_single_point_of_the_vrs_lands_on_its_point(network70):
     out = network70["dir"] / "vrs-spp.pos"
     subprocess.run([rnx2rtkp, "-p", "0", "-e", "-sys", "G,E,C", "-o", str(out), str(network70["vrs"]),
                     str(network70["dir"] / "nav.rnx")], check=True, capture_output=True, timeout=120)
-    t, xyz, q = _read_pos(out)
+    t, xyz, q = read_pos(out)
     point = parse_point(CHECK_POINT)
     enu = ecef_to_enu(xyz - point, point)
     h = np.hypot(enu[:, 0], enu[:, 1])

@@ -18,6 +18,7 @@ from augnet.gnss.geometry import ecef_to_enu
 from stations.record import record
 from stations.scenario import load_scenario
 from tests.conftest import require_tool
+from tests.rtklib_pos import read_pos
 
 pytestmark = pytest.mark.slow
 
@@ -52,19 +53,6 @@ def _truth(path, rx):
     raise KeyError(rx)
 
 
-def _read_pos(path):
-    t, xyz, q = [], [], []
-    for line in open(path):
-        if line.startswith("%") or not line.strip():
-            continue
-        f = line.split()
-        h, m, s = f[1].split(":")
-        t.append(int(h) * 3600 + int(m) * 60 + float(s))
-        xyz.append([float(v) for v in f[2:5]])
-        q.append(int(f[5]))
-    return np.array(t), np.array(xyz), np.array(q)
-
-
 def _judge_baseline(tmp_path, sc, nav_ephemerides=None, label="baseline-10km"):
     rnx2rtkp = require_tool("rnx2rtkp")
     record(sc, tmp_path, nav_ephemerides=nav_ephemerides, rtcm=False)
@@ -77,7 +65,7 @@ def _judge_baseline(tmp_path, sc, nav_ephemerides=None, label="baseline-10km"):
     subprocess.run([rnx2rtkp, "-k", str(conf), "-o", str(out), str(tmp_path / "B.obs"),
                     str(tmp_path / "A.obs"), str(tmp_path / "nav.rnx")],
                    check=True, capture_output=True, timeout=120)
-    t, xyz, q = _read_pos(out)
+    t, xyz, q = read_pos(out)
     assert len(t) == sc.n_epochs
     after = (t - t[0]) >= 60.0
     fixed = (q == 1) & after
@@ -127,7 +115,7 @@ def test_rnx2rtkp_follows_the_moving_train(tmp_path):
     subprocess.run([rnx2rtkp, "-k", str(conf), "-o", str(out), str(tmp_path / "G101.obs"),
                     str(tmp_path / "STA2.obs"), str(tmp_path / "nav.rnx")],
                    check=True, capture_output=True, timeout=120)
-    t, xyz, q = _read_pos(out)
+    t, xyz, q = read_pos(out)
     truth = {}
     for row in csv.DictReader(open(tmp_path / "truth.csv")):
         if row["receiver"] == "G101":
@@ -164,7 +152,7 @@ def test_rnx2rtkp_refixes_after_the_tunnel(tmp_path):
     subprocess.run([rnx2rtkp, "-k", str(conf), "-o", str(out), str(tmp_path / "G101.obs"),
                     str(tmp_path / "STA2.obs"), str(tmp_path / "nav.rnx")],
                    check=True, capture_output=True, timeout=120)
-    t, xyz, q = _read_pos(out)
+    t, xyz, q = read_pos(out)
     rows = [r for r in csv.DictReader(open(tmp_path / "truth.csv")) if r["receiver"] == "G101"]
     km = np.array([float(r["km"]) for r in rows])
     t_truth = np.array([float(r["gpst_s"]) for r in rows]) % 86400.0
@@ -212,6 +200,6 @@ def test_rnx2rtkp_single_point_exact_with_real_group_delays(shared_data, tmp_pat
         out = tmp_path / f"spp{navsys}.pos"
         subprocess.run([rnx2rtkp, "-k", str(conf), "-o", str(out), str(tmp_path / "A.obs"),
                         str(tmp_path / "nav.rnx")], check=True, capture_output=True, timeout=60)
-        _, xyz, q = _read_pos(out)
+        _, xyz, q = read_pos(out)
         assert len(xyz) == 3
         assert np.max(np.linalg.norm(xyz - truth, axis=1)) < 0.005, navsys
