@@ -5,7 +5,8 @@
 `--base-pos header` takes the base file's APPROX POSITION.  `--antex FILE` models both receivers' antennas
 from their RINEX headers (ANT # / TYPE looked up in the ANTEX file, ANTENNA: DELTA H/E/N): the base position
 and the solution are then the markers', as RTKLIB's with ant1/ant2-anttype=*.  `--opt NAME=VALUE` (repeatable) sets any
-field of the settings table `RtkOptions` (docs/options/rtk.md), after the flags.  Exit status 0 when every
+field of the settings table `RtkOptions` (docs/options/rtk.md), after the flags.  `--base-interp` interpolates
+a slower base's observations to each rover epoch (base_interpolation.py; rnx2rtkp's misc-timeinterp).  Exit status 0 when every
 epoch was processed (whatever its status), 2 for unusable inputs.
 """
 
@@ -47,10 +48,14 @@ def rtk(
                                               "(rnx2rtkp -ts)")] = None,
     end: Annotated[str | None, typer.Option("--end", help="rover epochs before this, GPST 'YYYY-MM-DDTHH:MM:SS' "
                                             "(rnx2rtkp -te)")] = None,
+    base_interp: Annotated[bool, typer.Option("--base-interp/--no-base-interp",
+                                              help="interpolate the base's observations to each rover epoch "
+                                              "between two base epochs (rnx2rtkp misc-timeinterp; files only)")] = False,
 ) -> None:
     """Post-process RTK: rover + base RINEX -> solution CSV (time, ECEF, geodetic, status, ratio, sigmas)."""
     from augnet.onboard.inputs import (InputError, antenna_setup, load_nav, load_obs, parse_gpst, parse_position,
                                        time_window)
+    from augnet.onboard.base_interpolation import MAX_INTERPOLATION_SPAN_S
     from augnet.onboard.postprocess import process
     from augnet.onboard.rtk import RtkOptions
     from augnet.onboard.solution import write_csv
@@ -86,7 +91,8 @@ def rtk(
             t1 = parse_gpst(end) if end is not None else math.inf
             rov = time_window(rov, t0, t1)
             # the base epoch in force at the first rover epoch is the latest before it
-            bas = time_window(bas, t0 - opt.max_age_s - 1.0, t1)
+            bas = time_window(bas, t0 - opt.max_age_s - 1.0,
+                              t1 + (MAX_INTERPOLATION_SPAN_S if base_interp else 0.0))
         if base_pos.strip().lower() == "header":
             bp = bas.approx_position_m
             if bp is None or not 6.0e6 < float((bp**2).sum()) ** 0.5 < 7.0e6:
@@ -108,7 +114,7 @@ def rtk(
         typer.echo(f"augnet rtk: {exc}", err=True)
         raise typer.Exit(2)
     sols = process(rov, bas, navdata, bp, opt, base_is_vrs=None if base_kind == "auto" else base_kind == "vrs",
-                   base_antenna=antennas.get("base"), rover_antenna=antennas.get("rover"))
+                   base_antenna=antennas.get("base"), rover_antenna=antennas.get("rover"), interpolate_base=base_interp)
     counts: dict[str, int] = {}
 
     def counted():

@@ -13,6 +13,7 @@ returns and what an RTCM MSM decoder can produce.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
@@ -108,6 +109,8 @@ class EpochObs:
     lli: np.ndarray  # (N, F) int
     wavelength_m: np.ndarray  # (N, F)
     signal: np.ndarray  # (N, F) '<U3' RINEX signal ('1C', '2W', '' when none)
+    # an epoch made from others (base_interpolation.py): how old its information is [s]; NaN for a measured one
+    info_age_s: float = math.nan
 
     @property
     def n_slots(self) -> int:
@@ -120,12 +123,13 @@ class EpochObs:
         phase = np.where(np.isfinite(ph) & (np.abs(ph) < MAX_ABS_PHASE_CYC) & (ph != 0.0), ph, np.nan)
         dop = np.where(np.abs(self.doppler_hz) < MAX_ABS_DOPPLER_HZ, self.doppler_hz, np.nan)
         snr = np.where(np.isfinite(self.snr_dbhz), self.snr_dbhz, np.nan)
-        return EpochObs(float(self.time), self.sats, code, phase, dop, snr, self.lli, self.wavelength_m, self.signal)
+        return EpochObs(float(self.time), self.sats, code, phase, dop, snr, self.lli, self.wavelength_m, self.signal,
+                        self.info_age_s)
 
     def take(self, index) -> "EpochObs":
         idx = np.asarray(index)
         return EpochObs(self.time, self.sats[idx], self.code_m[idx], self.phase_cyc[idx], self.doppler_hz[idx],
-                        self.snr_dbhz[idx], self.lli[idx], self.wavelength_m[idx], self.signal[idx])
+                        self.snr_dbhz[idx], self.lli[idx], self.wavelength_m[idx], self.signal[idx], self.info_age_s)
 
 
 def choose_signals(data: ObsArrays, n_slots: int = 2, systems: Sequence[str] = SUPPORTED_SYSTEMS) -> dict[str, list[str]]:

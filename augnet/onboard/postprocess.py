@@ -16,6 +16,7 @@ import numpy as np
 
 from augnet.gnss.antex import AntennaSetup
 from augnet.gnss.ephemeris import NavigationData
+from augnet.onboard.base_interpolation import MAX_INTERPOLATION_SPAN_S, flag_slips, interpolate
 from augnet.onboard.observations import ObsArrays, choose_signals, epochs
 from augnet.onboard.rtk import RtkFilter, RtkOptions, RtkSolution
 
@@ -26,10 +27,11 @@ EPOCH_MATCH_TOLERANCE_S = 0.05
 
 def process(rover: ObsArrays, base: ObsArrays, nav: NavigationData, base_position_m,
             options: RtkOptions | None = None, base_is_vrs: bool | None = None,
-            base_antenna: AntennaSetup | None = None, rover_antenna: AntennaSetup | None = None
-            ) -> Iterator[RtkSolution]:
+            base_antenna: AntennaSetup | None = None, rover_antenna: AntennaSetup | None = None,
+            interpolate_base: bool = False) -> Iterator[RtkSolution]:
     """Solutions for every rover epoch, in time order.  `base_is_vrs`: None takes it from the base
-    file's MARKER TYPE."""
+    file's MARKER TYPE.  `interpolate_base`: a rover epoch between two base epochs gets the base's
+    observations interpolated to its time (base_interpolation.py; RTKLIB's misc-timeinterp)."""
     opt = options or RtkOptions()
     rsig = choose_signals(rover, opt.n_slots, opt.systems)
     bsig = choose_signals(base, opt.n_slots, opt.systems)
@@ -42,7 +44,16 @@ def process(rover: ObsArrays, base: ObsArrays, nav: NavigationData, base_positio
         base_is_vrs = getattr(base, "non_physical", False)
     flt = RtkFilter(nav, base_position_m, opt, base_is_vrs=base_is_vrs, base_antenna=base_antenna,
                     rover_antenna=rover_antenna)
+    if interpolate_base:
+        flag_slips([base_epochs[i] for i in order])
+    used_from = -1  # the base epoch whose loss-of-lock flags were last handed on
     for ep in rov_epochs:
         k = int(np.searchsorted(base_times, ep.time + EPOCH_MATCH_TOLERANCE_S, side="right")) - 1
         b = base_epochs[order[k]] if k >= 0 else None
+        if (interpolate_base and b is not None and k + 1 < len(base_times)
+                and ep.time - base_times[k] > EPOCH_MATCH_TOLERANCE_S
+                and base_times[k + 1] - base_times[k] <= MAX_INTERPOLATION_SPAN_S):
+            b = interpolate(b, base_epochs[order[k + 1]], ep.time, nav, base_position_m,
+                            first_after_b0=used_from != k)
+        used_from = k
         yield flt.step(ep, b)

@@ -451,7 +451,8 @@ class RtkFilter:
         if base is None:
             self._time_update(t, spp, advance_only=True)
             return self._single(t, spp, "no base observations")
-        age = t - base.time
+        # an interpolated base epoch (post-processing) is as old as the nearer base epoch it was made from
+        age = t - base.time if math.isnan(base.info_age_s) else base.info_age_s
         if not np.isfinite(age) or age < -0.5 or age > opt.max_age_s:
             self._time_update(t, spp, advance_only=True)
             return self._single(t, spp, f"corrections stale: age {age:.1f} s over {opt.max_age_s:.1f} s", age)
