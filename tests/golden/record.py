@@ -1,4 +1,5 @@
 """Write the golden files: `python -m tests.golden.record [case ...]` (all cases when none is named).
+`--json DIR CASE...` writes the cases' outputs to DIR/CASE.json instead (how test_golden runs a case at the AVX2 level).
 
 Only on purpose: the golden files pin today's outputs, and rewriting them accepts whatever the code now
 computes. Cases that read ../shared/data are left out (and say so) when it is absent.
@@ -7,15 +8,29 @@ computes. Cases that read ../shared/data are left out (and say so) when it is ab
 from __future__ import annotations
 
 import hashlib
+import json
+import os
 import sys
 import time
 
 from tests.conftest import SHARED_DATA
 from tests.golden.cases import CASES, GOLDEN_SOURCE, run
 from tests.golden.compare import DATA_DIR, dumps, path_of
+from tests.golden.simd import needs_pinning, pinned_env
 
 
 def main(argv: list[str]) -> int:
+    if needs_pinning():  # numpy at the AVX2 level, as the golden files were written (simd.py)
+        os.execve(sys.executable, [sys.executable, "-m", "tests.golden.record", *argv], pinned_env())
+    if argv[:1] == ["--json"]:
+        if len(argv) < 3 or any(c not in CASES for c in argv[2:]):
+            print(f"usage: --json DIR CASE...; cases: {', '.join(CASES)}", file=sys.stderr)
+            return 2
+        for case in argv[2:]:
+            shared = SHARED_DATA if CASES[case][1] else None
+            with open(os.path.join(argv[1], f"{case}.json"), "w", encoding="utf-8") as f:
+                json.dump(run(case, shared), f)
+        return 0
     names = argv or list(CASES)
     unknown = [n for n in names if n not in CASES]
     if unknown:
