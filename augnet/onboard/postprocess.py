@@ -54,6 +54,6 @@ def process(rover: ObsArrays, base: ObsArrays, nav: NavigationData, base_positio
                 and ep.time - base_times[k] > EPOCH_MATCH_TOLERANCE_S
                 and base_times[k + 1] - base_times[k] <= MAX_INTERPOLATION_SPAN_S):
             b = interpolate(b, base_epochs[order[k + 1]], ep.time, nav, base_position_m,
-                            first_after_b0=used_from != k)
+                            first_after_b0=used_from != k, humidity=opt.tropo_humidity)
         used_from = k
         yield flt.step(ep, b)
