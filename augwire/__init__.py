@@ -6,6 +6,7 @@
   chunked.py       HTTP/1.1 chunked transfer coding (RFC 9112 section 7.1): encoder, sans-IO decoder
   passwords.py     scrypt password hashes (the caster's user file and the console's operators)
   errors.py        NtripProtocolError, the one error the NTRIP wire cores raise (carries the HTTP status)
+  throttle.py      failed-login throttling per key (exponential lock), shared by the console and the caster
 
 Rule: nothing here imports `augnet`, `ntrip_caster` or any third-party package but numpy, so the caster
 can use it and still import nothing from `augnet` (tests/wire/test_imports.py checks both). The package

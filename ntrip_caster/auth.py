@@ -2,6 +2,10 @@
 a few tens of ms per check). A caster sees the same credentials on every reconnect of a
 train, so successful checks are remembered in a bounded cache keyed by an HMAC of the credentials
 under a per-process random key (no plaintext password is kept).
+
+The user table may be replaced while the caster runs (`replace_users`: an operator's change, decision
+0180): a removed or re-passworded user's cached credentials are forgotten at once, and a verification
+already running against the old hash does not enter the cache.
 """
 
 from __future__ import annotations
@@ -41,6 +45,21 @@ class Authenticator:
         self._cache: OrderedDict[bytes, str] = OrderedDict()
         self._lock = threading.Lock()  # checks run in worker threads, lookups on the event loop
         self.checks = 0  # scrypt verifications run (the expensive path)
+        self.revision = 0  # bumped whenever a user loses credentials (removed, re-passworded)
+
+    def replace_users(self, users: dict[str, User]) -> set[str]:
+        """Take a new user table (on the event loop). Returns the names whose credentials no longer hold
+        (removed, or another password hash): their cached verifications are forgotten. A change of groups
+        alone revokes nothing here (`allowed` reads the table live)."""
+        old = self.users
+        revoked = {n for n, u in old.items() if n not in users or users[n].password_hash != u.password_hash}
+        self.users = dict(users)
+        if revoked:
+            self.revision += 1
+            with self._lock:
+                for key in [k for k, name in self._cache.items() if name in revoked]:
+                    del self._cache[key]
+        return revoked
 
     def credential_key(self, user: str, password: str) -> bytes:
         """An HMAC of the credentials (never the password itself): the cache's key, and the caster's for
@@ -78,8 +97,7 @@ class Authenticator:
         self.checks += 1
         if not verify_password(password, record.password_hash):
             return None
-        self._remember(user, password)
-        return user
+        return user if self._remember(user, password, record.password_hash) else None
 
     def check_source_password(self, password: str, write_groups: frozenset[str]) -> str | None:
         """NTRIP 1 SOURCE carries only a password: accept it when it is the password of a user in
@@ -90,12 +108,18 @@ class Authenticator:
                     return name
         return None
 
-    def _remember(self, user: str, password: str) -> None:
+    def _remember(self, user: str, password: str, password_hash: str) -> bool:
+        """Cache a verification made against `password_hash`, if that is still the user's hash (the table
+        may have changed while scrypt ran; `replace_users` swaps the table, then purges under the lock)."""
         key = self._cache_key(user, password)
         with self._lock:
+            current = self.users.get(user)
+            if current is None or current.password_hash != password_hash:
+                return False
             self._cache[key] = user
             while len(self._cache) > AUTH_CACHE_ENTRIES:
                 self._cache.popitem(last=False)
+        return True
 
     def allowed(self, user: str | None, groups: frozenset[str]) -> bool:
         if PUBLIC in groups:

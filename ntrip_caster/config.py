@@ -86,6 +86,7 @@ class MountConfig:
     str_fields: dict[str, Any] = field(default_factory=dict)
     factory: str | None = None  # vrs: "module:attribute"
     bases: tuple[str, ...] = ()  # nearest: candidate source mountpoints (empty = all)
+    enabled: bool = True  # a disabled mountpoint is left out of the sourcetable and serves no reader
 
     def str_record(self) -> StrRecord:
         return StrRecord(

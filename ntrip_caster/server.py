@@ -22,13 +22,13 @@ import time
 from collections import Counter
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
-from typing import Any, Callable
+from typing import Any, Callable, Iterable
 
 from augwire.chunked import LAST_CHUNK, encode_chunk
 from augwire.errors import NtripProtocolError
 from augwire.rtcm_framing import RtcmFrameAligner
 
-from .auth import PUBLIC, Authenticator
+from .auth import PUBLIC, Authenticator, User
 from .config import CasterConfig, MountConfig
 from .connection import (GgaLine, NtripServerConnection, RequestReceived, SourceData,
                          SourceFinished)
@@ -132,7 +132,7 @@ class Mountpoint:
     __slots__ = ("name", "kind", "cfg", "v1", "v2", "source", "aligner", "factory", "bytes_in",
                  "frames_in", "bytes_out", "clients_total", "drops", "source_sessions",
                  "created_at", "caster", "record", "auto", "fanout_last_ms", "fanout_max_ms",
-                 "n_clients", "taps")
+                 "n_clients", "taps", "enabled")
 
     def __init__(self, caster: "Caster", cfg: MountConfig, factory: StreamFactory | None = None) -> None:
         self.caster = caster
@@ -157,11 +157,19 @@ class Mountpoint:
         self.fanout_max_ms = 0.0
         self.n_clients = 0  # clients connected to this mountpoint (for nearest: not per base)
         self.taps: list[Callable[[bytes], None]] = []  # in-process readers (centre, relay factory)
+        self.enabled = cfg.enabled
+
+    def reconfigure(self, cfg: MountConfig) -> None:
+        """Take a new configuration of the same kind (groups, STR fields, enabled flag)."""
+        self.cfg = cfg
+        self.record = cfg.str_record()
+        self.enabled = cfg.enabled
 
     @property
     def live(self) -> bool:
-        """Can a client be served now (sourcetable lists it, clients are accepted)?"""
-        return self.kind != "source" or self.source is not None
+        """Can a client be served now (sourcetable lists it, clients are accepted)? A disabled mountpoint
+        is not, though its source may keep publishing (in-process taps such as the centre still read it)."""
+        return self.enabled and (self.kind != "source" or self.source is not None)
 
     def subscribe(self, s: ClientSession) -> None:
         (self.v1 if s.version == 1 else self.v2)[s.id] = s
@@ -207,7 +215,7 @@ class Mountpoint:
     def stats(self) -> dict[str, Any]:
         src = self.source
         return {
-            "name": self.name, "kind": self.kind, "live": self.live,
+            "name": self.name, "kind": self.kind, "live": self.live, "enabled": self.enabled,
             "clients": self.n_clients, "subscribers": len(self.v1) + len(self.v2),
             "clients_total": self.clients_total, "bytes_in": self.bytes_in,
             "frames_in": self.frames_in, "bytes_out": self.bytes_out, "drops": dict(self.drops),
@@ -404,6 +412,7 @@ class Caster:
         # on_alarm(kind, subject, severity, message, cleared): `augnet up` passes its alarm path.
         self.on_alarm: Callable[[str, str, str, str, bool], None] | None = None
         factories = dict(factories or {})
+        self._factories = factories  # kept: a VRS mountpoint added at run time takes its factory from here
         for m in config.mounts:
             factory = None
             if m.kind == "vrs":
@@ -516,6 +525,7 @@ class Caster:
         now = self.clock()
         key = None if source_password else self.auth.credential_key(req.user or "", req.password or "")
         running = self._verifying.get(key) if key is not None else None  # same credentials being verified
+        revision = self.auth.revision  # a revocation while scrypt runs voids the answer (below)
         wait = self.throttle.admit(address, name, now, shared=running is not None)
         if wait:
             self.counters["auth_refused_throttled"] += 1
@@ -545,6 +555,9 @@ class Caster:
         def done(f: asyncio.Future) -> None:
             ok = not f.cancelled() and f.exception() is None
             user = f.result() if ok else None
+            if user is not None and self.auth.revision != revision \
+                    and self.auth.cached_user(user, req.password) != user:
+                user = None  # verified against credentials revoked meanwhile
             t = self.clock()
             if not ok:
                 self.throttle.abandon(address, name)
@@ -629,6 +642,9 @@ class Caster:
                 return
             if not self.auth.allowed(user, mount.cfg.read):
                 proto.reject(401, "credentials required" if req.user is None else "bad credentials")
+                return
+            if not mount.enabled:  # disabled while the credentials were checked
+                proto.reject(404, f"no mountpoint {mount.name}")
                 return
             self._admit_client(proto, req, mount, user)
 
@@ -788,7 +804,7 @@ class Caster:
                 self.drop_client(s, "factory_error")
         else:  # nearest base
             bases = {name: (m.record.latitude, m.record.longitude) for name, m in self.mounts.items()
-                     if m.kind == "source" and m.source is not None
+                     if m.kind == "source" and m.source is not None and m.enabled
                      and (not mount.cfg.bases or name in mount.cfg.bases)}
             current = s.base.name if s.base is not None else None
             chosen = choose_base(fix, bases, current, self.limits.base_switch_hysteresis_m)
@@ -819,6 +835,84 @@ class Caster:
         self.counters["drop_refused"] += 1
         self.remove_client(s)
         s.proto.close()
+
+    def end_client(self, s: ClientSession, reason: str) -> None:
+        """End a client's stream cleanly (v2: the last chunk) and close: an operator's decision."""
+        if s.closed:
+            return
+        if s.version == 2:
+            s.transport.write(LAST_CHUNK)
+        s.mount.drops[reason] += 1
+        self.counters[f"drop_{reason}"] += 1
+        self.remove_client(s)
+        s.proto.close()
+
+    # --- the operator's word, applied while running (decision 0180) --------------------------------
+    def set_users(self, users: dict[str, User]) -> set[str]:
+        """Take the whole user table (disabled users left out). Sessions of a user removed, re-passworded
+        or no longer in a group the mountpoint needs are closed. Returns the names revoked."""
+        revoked = self.auth.replace_users(users)
+        self._enforce_access(revoked)
+        return revoked
+
+    def set_mounts(self, mounts: Iterable[MountConfig]) -> None:
+        """Take the whole mountpoint table: known names are reconfigured, new ones created (a VRS one only
+        with a factory given at construction), configured ones missing from the table disabled (mountpoints
+        created by their own source are left alone). Readers of a disabled mountpoint are closed."""
+        table = {m.name: m for m in mounts}
+        for name, m in list(self.mounts.items()):
+            if m.auto:
+                continue
+            cfg = table.pop(name, None)
+            if cfg is None:
+                cfg = replace(m.cfg, enabled=False)
+            elif cfg.kind != m.kind:  # a live mountpoint does not change its nature: logged, left as it is
+                log.warning("mountpoint %s: kind %s -> %s needs a restart; kept as %s", name, m.kind, cfg.kind, m.kind)
+                cfg = replace(cfg, kind=m.kind)
+            m.reconfigure(cfg)
+        for name, cfg in table.items():
+            if name == STATS_PATH:
+                continue
+            factory = None
+            if cfg.kind == "vrs":
+                factory = self._factories.get(name)
+                if factory is None:
+                    log.warning("mountpoint %s: no VRS stream factory of that name here; not created", name)
+                    continue
+            existing = self.mounts.get(name)
+            if existing is not None and existing.auto:  # configured now: its source keeps its place
+                existing.auto = False
+                existing.reconfigure(cfg)
+                continue
+            self.mounts[name] = mp = Mountpoint(self, cfg, factory)
+            attach = getattr(factory, "attach", None)
+            if callable(attach):
+                attach(self)
+            log.info("mountpoint %s (%s) added", name, cfg.kind)
+        self._enforce_access(set())
+
+    def _enforce_access(self, revoked: set[str]) -> None:
+        """Close what the current tables no longer allow: readers of disabled mountpoints, readers and
+        sources whose user was revoked or left the groups a mountpoint needs."""
+        auth = self.auth
+        for s in list(self.clients.values()):
+            read = s.mount.cfg.read
+            if not s.mount.enabled:
+                self.end_client(s, "mount_disabled")
+            elif PUBLIC not in read and (s.user in revoked or not auth.allowed(s.user, read)):
+                self.end_client(s, "revoked")
+        for m in self.mounts.values():
+            src = m.source
+            if src is None or PUBLIC in m.cfg.write:
+                continue
+            record = auth.users.get(src.user) if src.user is not None else None
+            if src.user in revoked or record is None or not (record.groups & m.cfg.write):
+                m.drops["source_revoked"] += 1
+                self.counters["drop_source_revoked"] += 1
+                log.info("source of %s closed: user %s revoked", m.name, src.user)
+                proto = src.proto
+                proto.close()
+                self.remove_source(m, proto)
 
     def remove_client(self, s: ClientSession) -> None:
         if s.closed:

@@ -1,8 +1,8 @@
 """Failed NTRIP authentication throttled per client address and per user name (sans-IO), and the flood alarm.
 
-The design is the console's login throttle (augnet/console/throttle.py: free failures, then an exponential
-lock, refused without hashing, attempts in flight counted against the free ones); `ntrip_caster` may not
-import `augnet` (architecture.md), so the caster has its own, with two differences a caster needs:
+The per-key rules are the console's (free failures, then an exponential lock, refused without hashing,
+attempts in flight counted against the free ones), shared through `augwire/throttle.py` (`ntrip_caster`
+may not import `augnet`: architecture.md). Two differences a caster needs live here:
   * many trains share one name (augnet's "train") and often one address (carrier NAT): a key whose last
     verified attempt succeeded and that has no failure since is *trusted* and may have up to
     MAX_IN_FLIGHT_TRUSTED verifications in flight (a fleet reconnecting after a caster restart), where an
@@ -17,35 +17,16 @@ Nothing here reads a clock: every call takes `now` (seconds, any monotonic origi
 from __future__ import annotations
 
 from collections import OrderedDict
-from dataclasses import dataclass
 
-# Same figures and sources as the console's throttle: 5 free failures (OWASP "a small number"; fail2ban's
-# sshd jail 5), a 1 s lock doubling per failure, at most 15 min (Amazon Cognito), forgotten after an hour.
-FREE_FAILURES = 5
-BACKOFF_BASE_S = 1.0
-MAX_LOCKOUT_S = 900.0
-FORGET_AFTER_S = 3600.0
-# Keys (addresses + names) and trusted pairs remembered; beyond this the least recently used go first.
-MAX_KEYS = 100_000
+from augwire.throttle import (BACKOFF_BASE_S, FORGET_AFTER_S, FREE_FAILURES, MAX_KEYS, MAX_LOCKOUT_S,
+                              RETRY_WHILE_IN_FLIGHT_S, KeyState, KeyTable, backoff_s, wait_s)
+
+__all__ = ["AuthThrottle", "BACKOFF_BASE_S", "FLOOD_ALARM_EVENTS", "FLOOD_ALARM_WINDOW_S", "FORGET_AFTER_S",
+           "FREE_FAILURES", "FloodAlarm", "MAX_IN_FLIGHT_TRUSTED", "MAX_KEYS", "MAX_LOCKOUT_S",
+           "RETRY_WHILE_IN_FLIGHT_S", "backoff_s"]
+
 # In-flight verifications of a trusted key: the verification pool's queue bound (limits.py) is the real cap.
 MAX_IN_FLIGHT_TRUSTED = 1_000_000
-RETRY_WHILE_IN_FLIGHT_S = 1  # Retry-After when refused only because other attempts are being verified
-
-
-@dataclass(slots=True)
-class _KeyState:
-    failures: int = 0
-    locked_until: float = 0.0
-    last_seen: float = 0.0
-    in_flight: int = 0
-    trusted: bool = False  # last verified outcome a success, no failure since
-
-
-def backoff_s(failures: int) -> float:
-    """Lock length after `failures` consecutive failures of one key [s] (0: not locked)."""
-    if failures < FREE_FAILURES:
-        return 0.0
-    return min(MAX_LOCKOUT_S, BACKOFF_BASE_S * 2.0 ** min(failures - FREE_FAILURES, 30))
 
 
 class AuthThrottle:
@@ -55,34 +36,18 @@ class AuthThrottle:
 
     def __init__(self, max_keys: int = MAX_KEYS) -> None:
         self.max_keys = max_keys
-        self._keys: OrderedDict[tuple[str, str], _KeyState] = OrderedDict()
+        self._keys = KeyTable(max_keys, stamp_new=True)  # the shared rules (augwire/throttle.py)
         self._pairs: OrderedDict[tuple[str, str], float] = OrderedDict()  # (address, name) -> last success
 
-    def _state(self, key: tuple[str, str], now: float) -> _KeyState:
-        st = self._keys.get(key)
-        if st is not None and st.in_flight == 0 and st.locked_until <= now and now - st.last_seen > FORGET_AFTER_S:
-            st = None  # quiet long enough: forgotten
-        if st is None:
-            st = self._keys[key] = _KeyState(last_seen=now)
-            while len(self._keys) > self.max_keys:
-                self._keys.popitem(last=False)
-        return st
-
     @staticmethod
-    def _wait(st: _KeyState, now: float, shared: bool = False) -> int:
-        if st.locked_until > now:
-            return max(1, int(-(-(st.locked_until - now) // 1)))  # whole seconds, rounded up (RFC 9110 10.2.3)
-        if shared or st.trusted:
-            allowed = MAX_IN_FLIGHT_TRUSTED
-        else:
-            allowed = FREE_FAILURES - st.failures if st.failures < FREE_FAILURES else 1
-        return RETRY_WHILE_IN_FLIGHT_S if st.in_flight >= allowed else 0
+    def _wait(st: KeyState, now: float, shared: bool = False) -> int:
+        return wait_s(st, now, MAX_IN_FLIGHT_TRUSTED if shared or st.trusted else None)
 
-    def _keys_of(self, address: str, name: str, now: float) -> list[_KeyState]:
-        states = [self._state(("addr", address), now)]
+    def _keys_of(self, address: str, name: str, now: float) -> list[KeyState]:
+        states = [self._keys.state(("addr", address), now)]
         pair = self._pairs.get((address, name))
         if pair is None or now - pair > FORGET_AFTER_S:  # a known (address, name) pair skips the name's lock
-            states.append(self._state(("user", name), now))
+            states.append(self._keys.state(("user", name), now))
         return states
 
     def admit(self, address: str, name: str, now: float, shared: bool = False) -> int:
@@ -99,26 +64,16 @@ class AuthThrottle:
     def failed(self, address: str, name: str, now: float) -> None:
         self._pairs.pop((address, name), None)
         for key in (("addr", address), ("user", name)):
-            st = self._state(key, now)
-            st.in_flight = max(0, st.in_flight - 1)
-            st.failures += 1
-            st.trusted = False
-            st.last_seen = now
-            lock = backoff_s(st.failures)
-            if lock:
-                st.locked_until = now + lock
-            self._keys.move_to_end(key)
+            self._keys.fail(key, now).trusted = False
 
     def succeeded(self, address: str, name: str, now: float) -> None:
         """The name starts afresh; the address keeps its failures (a valid account must not reset the count
         of an address spraying other names) and is trusted only when it has none."""
         for key in (("addr", address), ("user", name)):
-            st = self._keys.get(key)
-            if st is not None:
-                st.in_flight = max(0, st.in_flight - 1)
-        self._keys.pop(("user", name), None)
-        self._state(("user", name), now).trusted = True
-        addr = self._state(("addr", address), now)
+            self._keys.release(key)
+        self._keys.pop(("user", name))
+        self._keys.state(("user", name), now).trusted = True
+        addr = self._keys.state(("addr", address), now)
         addr.trusted = addr.failures == 0
         self._pairs[(address, name)] = now
         self._pairs.move_to_end((address, name))
@@ -128,9 +83,7 @@ class AuthThrottle:
     def abandon(self, address: str, name: str) -> None:
         """An admitted attempt that was not verified after all (pool full, verification raised)."""
         for key in (("addr", address), ("user", name)):
-            st = self._keys.get(key)
-            if st is not None:
-                st.in_flight = max(0, st.in_flight - 1)
+            self._keys.release(key)
 
 
 # A caster-wide alarm: this many failed or refused authentications within one window. A fleet of 10,000

@@ -51,12 +51,14 @@ ERROR_FIELDS_DROPPED = frozenset({"input", "url"})
 
 def create_app(sessions: sessionmaker[Session], live: LiveState | None = None, *,
                clock: Callable[[], float] = time.monotonic, max_body_bytes: int = MAX_BODY_BYTES,
-               allowed_origins: tuple[str, ...] = ()) -> FastAPI:
+               allowed_origins: tuple[str, ...] = (), bus=None) -> FastAPI:
     """The console over a store (`augnet.store.open_store(url)`) and, when a system runs in this process,
     its live state. Without one the live sections are empty.
 
     `clock` times the login throttle (tests step it); `allowed_origins` are browser origins besides the
-    console's own that may open the live websocket (e.g. "https://console.example.org" behind a proxy)."""
+    console's own that may open the live websocket (e.g. "https://console.example.org" behind a proxy);
+    `bus` (an `augnet.bus.Bus` on this app's event loop) carries caster user and mountpoint changes to the
+    casters (routers/caster.py)."""
     app = FastAPI(title="augnet console", version="1.0",
                   description="Operator console of the track-side GNSS augmentation network.")
     app.state.sessions = sessions
@@ -66,6 +68,7 @@ def create_app(sessions: sessionmaker[Session], live: LiveState | None = None, *
     app.state.clock = clock
     app.state.login_throttle = LoginThrottle()
     app.state.allowed_origins = frozenset(o.rstrip("/").lower() for o in allowed_origins)
+    app.state.bus = bus
 
     for module in (auth, operators, stations, network, trains, alarms, caster, history, live_feed):
         app.include_router(module.router, prefix=API_PREFIX)

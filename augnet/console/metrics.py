@@ -25,6 +25,9 @@ CONTENT_TYPE = "text/plain; version=0.0.4; charset=utf-8"
 # Upper bounds [s] of the console latency histogram, around the issue's 50 ms p99 goal.
 LATENCY_BUCKETS_S = (0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5)
 UNMATCHED_ROUTE = "unmatched"  # 404s: one series, whatever the path
+# The caster's login counters (ntrip_caster/server.py `counters`) by the outcome label they are shown under.
+CASTER_LOGIN_OUTCOMES = (("succeeded", "auth_succeeded"), ("failed", "auth_failed"),
+                         ("throttled", "auth_refused_throttled"), ("busy", "auth_refused_busy"))
 
 
 def escape_label(value: str) -> str:
@@ -207,12 +210,48 @@ def render(request_metrics: RequestMetrics, live: LiveState, session: Session,
         out += [f"augnet_console_logins_total{labels(outcome=k)} {getattr(logins, k)}"
                 for k in ("succeeded", "failed", "refused")]
 
-    snap = caster_snapshot
-    if snap is not None:
-        _gauge(out, "augnet_caster_clients", "NTRIP clients connected to the caster.",
-               [({}, snap.get("clients_now", 0))])
-        out += ["# HELP augnet_caster_mount_bytes_out_total Bytes sent to clients per mountpoint.",
-                "# TYPE augnet_caster_mount_bytes_out_total counter"]
-        for name, m in sorted((snap.get("mounts") or {}).items()):
-            out.append(f"augnet_caster_mount_bytes_out_total{labels(mount=name)} {number(m.get('bytes_out', 0))}")
+    if caster_snapshot is not None:
+        out += caster_lines(caster_snapshot)
     return "\n".join(out) + "\n"
+
+
+def _counter(out: list[str], name: str, help_text: str, samples: list[tuple[dict, float | int]]) -> None:
+    out.append(f"# HELP {name} {help_text}")
+    out.append(f"# TYPE {name} counter")
+    for lab, value in samples:
+        out.append(f"{name}{labels(**lab)} {number(value)}")
+
+
+def _count(value: Any) -> float | int:
+    """A snapshot's number, or 0 for anything else (the snapshot is the caster's, read as given)."""
+    return value if isinstance(value, (int, float)) and not isinstance(value, bool) else 0
+
+
+def caster_lines(snap: dict) -> list[str]:
+    """The caster's snapshot (`ntrip_caster.server.Caster.snapshot`) as metrics: clients and connections,
+    NTRIP logins by outcome (a rising failed / throttled / busy is someone guessing passwords, issue 19),
+    answers by status, clients dropped by reason (revoked: an operator's change, decision 0180), bytes per
+    mountpoint."""
+    out: list[str] = []
+    counters = snap.get("counters") if isinstance(snap.get("counters"), dict) else {}
+    _gauge(out, "augnet_caster_clients", "NTRIP clients connected to the caster.",
+           [({}, _count(snap.get("clients_now", 0)))])
+    _gauge(out, "augnet_caster_connections", "TCP connections open on the caster (clients, sources, pending).",
+           [({}, _count(snap.get("connections_now", 0)))])
+    _gauge(out, "augnet_caster_auth_alarm", "1 while the caster's failed-login alarm is raised.",
+           [({}, 1 if snap.get("auth_alarm") else 0)])
+    _counter(out, "augnet_caster_logins_total", "NTRIP credential checks by outcome (throttled and busy: "
+             "refused without hashing).",
+             [({"outcome": outcome}, _count(counters.get(key, 0))) for outcome, key in CASTER_LOGIN_OUTCOMES])
+    _counter(out, "augnet_caster_responses_total", "NTRIP error answers by HTTP status.",
+             [({"status": k[len("status_"):]}, _count(v)) for k, v in sorted(counters.items())
+              if k.startswith("status_")])
+    _counter(out, "augnet_caster_drops_total", "NTRIP clients and sources the caster closed, by reason.",
+             [({"reason": k[len("drop_"):]}, _count(v)) for k, v in sorted(counters.items())
+              if k.startswith("drop_")])
+    mounts = sorted((snap.get("mounts") or {}).items())
+    _counter(out, "augnet_caster_mount_bytes_out_total", "Bytes sent to clients per mountpoint.",
+             [({"mount": name}, _count(m.get("bytes_out", 0))) for name, m in mounts])
+    _counter(out, "augnet_caster_mount_bytes_in_total", "Bytes received from the source per mountpoint.",
+             [({"mount": name}, _count(m.get("bytes_in", 0))) for name, m in mounts])
+    return out

@@ -1,4 +1,5 @@
-"""Failed-login throttling: exponential back-off per client address and per operator name (sans-IO).
+"""Failed-login throttling: exponential back-off per client address and per operator name (sans-IO); the
+per-key rules are the ones the caster shares (augwire/throttle.py), the audit bookkeeping is the console's.
 
 `LoginThrottle` holds no socket and reads no clock of its own: every call takes `now` (seconds, any
 monotonic origin), so tests step a clock instead of sleeping. The login route asks `admit()` before it
@@ -20,34 +21,19 @@ Rules (per key; a key is ("addr", client address) or ("user", submitted name), c
 from __future__ import annotations
 
 import threading
-from collections import OrderedDict
 from dataclasses import dataclass, field
 
-# Free failures before the first lock: a typo or two plus a caps-lock, as OWASP's authentication cheat
-# sheet suggests ("a small number"); Django-axes and fail2ban's sshd jail default to 3 and 5.
-FREE_FAILURES = 5
-BACKOFF_BASE_S = 1.0  # first lock after the free failures; doubles with each failure after it
-# Longest lock: 15 min. Amazon Cognito's user pools do the same (5 free failures, a lock from 1 s doubling to
-# about 15 min). 100 guesses at one name then take 21.5 h; an operator locked out waits 15 min at worst.
-MAX_LOCKOUT_S = 900.0
-FORGET_AFTER_S = 3600.0  # a key with no failure for an hour (and not locked) starts afresh
-# Keys remembered (addresses + names); beyond this the least recently failed are dropped first.
-MAX_KEYS = 100_000
-RETRY_WHILE_IN_FLIGHT_S = 1  # Retry-After when refused only because other attempts are being verified
+from augwire.throttle import (BACKOFF_BASE_S, FORGET_AFTER_S, FREE_FAILURES, MAX_KEYS, MAX_LOCKOUT_S,
+                              RETRY_WHILE_IN_FLIGHT_S, KeyTable, backoff_s, wait_s)
+
+__all__ = ["ALARM_FAILURES", "ALARM_REFUSALS", "BACKOFF_BASE_S", "FORGET_AFTER_S", "FREE_FAILURES", "MAX_KEYS",
+           "MAX_LOCKOUT_S", "RETRY_WHILE_IN_FLIGHT_S", "Counters", "Failure", "LoginThrottle", "Verdict",
+           "backoff_s"]
+
 # An alarm for the operators: twice the free failures (past any typing slip) for one address or one name, or
 # this many refused attempts from one address (a client ignoring Retry-After: a script, not a person).
 ALARM_FAILURES = 2 * FREE_FAILURES
 ALARM_REFUSALS = 50
-
-
-@dataclass(slots=True)
-class _KeyState:
-    failures: int = 0
-    locked_until: float = 0.0
-    last_failure: float = 0.0
-    in_flight: int = 0
-    refused: int = 0
-    lock_audited: bool = True  # whether the current lock's first refusal was audited (no lock: True)
 
 
 @dataclass(frozen=True, slots=True)
@@ -78,45 +64,21 @@ class Counters:
     succeeded: int = 0
 
 
-def backoff_s(failures: int) -> float:
-    """Lock length after `failures` consecutive failures of one key [s] (0: not locked)."""
-    if failures < FREE_FAILURES:
-        return 0.0
-    return min(MAX_LOCKOUT_S, BACKOFF_BASE_S * 2.0 ** min(failures - FREE_FAILURES, 30))
-
-
 @dataclass
 class LoginThrottle:
     max_keys: int = MAX_KEYS
     counters: Counters = field(default_factory=Counters)
 
     def __post_init__(self) -> None:
-        self._keys: OrderedDict[tuple[str, str], _KeyState] = OrderedDict()
+        self._keys = KeyTable(self.max_keys)  # the shared rules (augwire/throttle.py)
         self._unaudited: dict[str, int] = {}  # address -> refusals not yet written to the audit log
         self._lock = threading.Lock()  # the login route runs in worker threads
-
-    def _state(self, key: tuple[str, str], now: float) -> _KeyState:
-        st = self._keys.get(key)
-        if st is not None and st.in_flight == 0 and st.locked_until <= now \
-                and now - st.last_failure > FORGET_AFTER_S:
-            st = None  # quiet long enough: forgotten
-        if st is None:
-            st = self._keys[key] = _KeyState()
-            while len(self._keys) > self.max_keys:
-                self._keys.popitem(last=False)
-        return st
-
-    def _wait(self, st: _KeyState, now: float) -> int:
-        if st.locked_until > now:
-            return max(1, int(-(-(st.locked_until - now) // 1)))  # whole seconds, rounded up (RFC 9110 10.2.3)
-        free = FREE_FAILURES - st.failures if st.failures < FREE_FAILURES else 1
-        return RETRY_WHILE_IN_FLIGHT_S if st.in_flight >= free else 0
 
     def admit(self, address: str, name: str, now: float) -> Verdict:
         """May this attempt verify a password now? If so it is in flight until failed() / succeeded()."""
         with self._lock:
-            states = [self._state(("addr", address), now), self._state(("user", name), now)]
-            wait = max(self._wait(st, now) for st in states)
+            states = [self._keys.state(("addr", address), now), self._keys.state(("user", name), now)]
+            wait = max(wait_s(st, now) for st in states)
             if wait:
                 self.counters.refused += 1
                 states[0].refused += 1
@@ -138,34 +100,26 @@ class LoginThrottle:
             self.counters.failed += 1
             alarm = False
             for key in (("addr", address), ("user", name)):
-                st = self._state(key, now)
-                st.in_flight = max(0, st.in_flight - 1)
-                st.failures += 1
+                st = self._keys.fail(key, now)
                 alarm |= st.failures == ALARM_FAILURES
-                st.last_failure = now
-                lock = backoff_s(st.failures)
-                if lock:
-                    st.locked_until = now + lock
+                if backoff_s(st.failures):
                     st.lock_audited = False
-                self._keys.move_to_end(key)
-            return Failure(self._keys[("user", name)].failures, self._unaudited.pop(address, 0), alarm)
+            return Failure(self._keys.get(("user", name)).failures, self._unaudited.pop(address, 0), alarm)
 
     def succeeded(self, address: str, name: str, now: float) -> int:
         """A verified attempt succeeded: the name starts afresh. Returns the address's unaudited refusals."""
         with self._lock:
             self.counters.succeeded += 1
-            st = self._state(("addr", address), now)
+            st = self._keys.state(("addr", address), now)
             st.in_flight = max(0, st.in_flight - 1)
-            self._keys.pop(("user", name), None)
+            self._keys.pop(("user", name))
             return self._unaudited.pop(address, 0)
 
     def abandon(self, address: str, name: str) -> None:
         """A verification that raised instead of answering: no longer in flight, counted as nothing."""
         with self._lock:
             for key in (("addr", address), ("user", name)):
-                st = self._keys.get(key)
-                if st is not None:
-                    st.in_flight = max(0, st.in_flight - 1)
+                self._keys.release(key)
 
     def unaudited(self, address: str) -> int:
         with self._lock:

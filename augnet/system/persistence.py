@@ -16,12 +16,15 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
 from augnet.store import queries
-from augnet.store.models import CasterUser, Mountpoint, Severity, Station, Train, TrainSession, utcnow
+from augnet.store.models import AuditEntry, CasterUser, Mountpoint, Severity, Station, Train, TrainSession, utcnow
 from augnet.system.baseline_quality import quality_rows
+from augwire.passwords import verify_password
+from ntrip_caster.config import CasterConfig
 
 log = logging.getLogger(__name__)
 
 SYSTEM_ACTOR = "system"  # audit-log actor for what the running system itself records
+SEED_ACTION = "caster.seed"  # the audit entry that marks a store's caster configuration as seeded
 QUALITY_INTERVAL_S = 10.0  # one quality-history row per baseline this often
 
 
@@ -62,20 +65,49 @@ def register_station(s: Session, code: str, name: str, xyz_m, rtcm_id: int, moun
     return bool(st.enabled)
 
 
-def register_mountpoint(s: Session, name: str, kind: str, read: str, write: str = "") -> None:
-    mp = s.scalar(select(Mountpoint).where(Mountpoint.name == name))
-    if mp is None:
-        s.add(Mountpoint(name=name, kind=kind, read_groups=read, write_groups=write))
-    else:
-        mp.kind, mp.read_groups, mp.write_groups = kind, read, write
+def join_groups(groups) -> str:
+    """The store's spelling of a set of caster groups: comma separated, sorted."""
+    return ",".join(sorted(groups))
 
 
-def register_caster_user(s: Session, name: str, password_hash: str, groups: str) -> None:
+def seed_caster(s: Session, cfg: CasterConfig) -> bool:
+    """Seed the store's caster users and mountpoints from the scenario's `cfg`, once per store: only
+    while neither table has a row and no seed was recorded (decision 0180: the store is the one source
+    of truth; a row an operator changed or deleted is never rewritten or brought back). One audit entry
+    under the system actor records the seed, or that a store configured before had none. True: seeded."""
+    if s.scalar(select(AuditEntry.id).where(AuditEntry.action == SEED_ACTION).limit(1)) is not None:
+        return False
+    if s.scalar(select(CasterUser.id).limit(1)) is not None or s.scalar(select(Mountpoint.id).limit(1)) is not None:
+        queries.audit(s, SYSTEM_ACTOR, SEED_ACTION, "caster", seeded=False, reason="store already configured")
+        return False
+    for u in cfg.users.values():
+        s.add(CasterUser(name=u.name, password_hash=u.password_hash, groups=join_groups(u.groups)))
+    for m in cfg.mounts:
+        s.add(Mountpoint(name=m.name, kind=m.kind, format=m.str_record().format, read_groups=join_groups(m.read),
+                         write_groups=join_groups(m.write)))
+    queries.audit(s, SYSTEM_ACTOR, SEED_ACTION, "caster", seeded=True, users=sorted(cfg.users),
+                  mountpoints=[m.name for m in cfg.mounts])
+    return True
+
+
+def own_account_password(s: Session, name: str, known: str | None, fresh: str, fresh_hash: str) -> str | None:
+    """The password the run's own parts (its stations, its trains) log in with as caster user `name`:
+    `known` (the last state file's) while the store's hash still takes it; else, when no operator ever
+    changed the account (only the system wrote it), the run rotates it to `fresh` (audited under the
+    system actor). None: the account is missing, or an operator changed it -- their word stands, and the
+    run's parts are refused like anybody else (decision 0180)."""
     u = s.scalar(select(CasterUser).where(CasterUser.name == name))
     if u is None:
-        s.add(CasterUser(name=name, password_hash=password_hash, groups=groups))
-    else:
-        u.password_hash, u.groups = password_hash, groups
+        return None
+    if known is not None and verify_password(known, u.password_hash):
+        return known
+    touched = s.scalar(select(AuditEntry.id).where(AuditEntry.target == name, AuditEntry.actor != SYSTEM_ACTOR,
+                                                   AuditEntry.action.startswith("caster_user.")).limit(1))
+    if touched is not None:
+        return None
+    u.password_hash = fresh_hash
+    queries.audit(s, SYSTEM_ACTOR, "caster_user.rotate", name, reason="password not in the state file")
+    return fresh
 
 
 def open_train_session(s: Session, code: str, mountpoint: str) -> int:

@@ -1,6 +1,6 @@
 """The configuration of one `augnet up` run, computed before anything starts: the scenario as the run
-plays it, where the stations sit along the line, the caster's mountpoints and users, and what the store
-records of them. Pure functions (the store one runs in the store writer's session)."""
+plays it, where the stations sit along the line, the caster's mountpoints and users (the seed of an empty
+store: decision 0180), and what the store records of them. Pure functions (the store one runs in the store writer's session)."""
 
 from __future__ import annotations
 
@@ -71,19 +71,21 @@ def station_along_km(world: World, stations) -> dict[str, float]:
     return out
 
 
-def register_run(db, stations, train_rx, hashes: dict[str, str]) -> dict[str, bool]:
-    """Store the run's configuration (in the store writer's session `db`); returns each station's enabled flag."""
+def register_run(db, stations, cfg: CasterConfig, accounts: dict[str, tuple[str | None, str, str]]
+                 ) -> tuple[dict[str, bool], dict[str, str | None]]:
+    """Store the run's configuration (in the store writer's session `db`): the stations the store does not
+    know, and the scenario's caster users and mountpoints `cfg` into a store that has none yet (decision
+    0180: after that the store alone decides). `accounts`: for each of the run's own caster users, the
+    password of the last state file (or None), a fresh one and its hash (`cfg` holds that hash). Returns
+    each station's enabled flag and the password each own account logs in with (None: it cannot)."""
     enabled = {}
     for rx in stations:
         enabled[rx.id] = persistence.register_station(db, rx.id, rx.id, rx.ecef[0], rx.rtcm_id,
                                                       mountpoint_of("station", rx.id))
-        persistence.register_mountpoint(db, rx.id, "source", TRAIN_GROUP, STATION_GROUP)
-    for rx in train_rx:
-        persistence.register_mountpoint(db, mountpoint_of("train", rx.id), "source", TRAIN_GROUP, STATION_GROUP)
-    persistence.register_mountpoint(db, VRS_MOUNT, "vrs", TRAIN_GROUP)
-    persistence.register_caster_user(db, STATION_USER, hashes[STATION_USER], STATION_GROUP)
-    persistence.register_caster_user(db, TRAIN_USER, hashes[TRAIN_USER], TRAIN_GROUP)
-    return enabled
+    if persistence.seed_caster(db, cfg):
+        return enabled, {name: fresh for name, (_known, fresh, _h) in accounts.items()}
+    return enabled, {name: persistence.own_account_password(db, name, known, fresh, fresh_hash)
+                     for name, (known, fresh, fresh_hash) in accounts.items()}
 
 
 def nav_system(sc: Scenario) -> str:
@@ -93,7 +95,8 @@ def nav_system(sc: Scenario) -> str:
 
 
 def caster_config(settings: SystemSettings, sc: Scenario, stations, train_rx, hashes: dict[str, str]) -> CasterConfig:
-    """The caster's mountpoints (a source per station and per train's raw stream, the VRS) and users."""
+    """The scenario's caster mountpoints (a source per station and per train's raw stream, the VRS) and users:
+    what an empty store is seeded with, and the STR fields the store does not keep."""
     mounts = []
     nav = nav_system(sc)
     for rx in stations:

@@ -26,6 +26,7 @@ import os
 import secrets
 import signal
 import time
+from dataclasses import replace
 
 from augnet.centre.engine import SUBJECT_ALARMS, EpochReport
 from augnet.onboard.trackmap import TrackDatabase
@@ -69,6 +70,7 @@ class System:
         self.credentials: dict[str, str] = {}
         self.centre: CentreService | None = None
         self.caster: Caster | None = None
+        self.caster_access = None  # CasterAccessSync: the caster's tables follow the store
         self.bus = None
         self.rbc = None
         self.publisher = LivePublisher()
@@ -90,12 +92,14 @@ class System:
         train_rx = [rx for rx in world.receivers if rx.kind == "train"]
         self.station_km = station_along_km(world, stations)
         self._open_store()
-        hashes = await self._make_credentials()
-        enabled = await self._register_run(stations, train_rx, hashes)
+        accounts = await self._make_credentials()
+        seed = caster_config(self.settings, sc, stations, train_rx, {n: h for n, (_k, _p, h) in accounts.items()})
+        enabled = await self._register_run(stations, seed, accounts)
         self._make_centre(sc, stations, enabled)
-        port = await self._start_caster(sc, stations, train_rx, hashes)
+        port = await self._start_caster(seed, stations, train_rx)
         await self.centre.start()  # its process starts once the caster's taps are in place
         await self._start_bus()
+        await self.caster_access.start()  # from here on the console's changes reach the caster
         await self._start_rbc(stations)
         await self._start_console(stations)
         self._start_trains(sc, train_rx, port)
@@ -115,21 +119,35 @@ class System:
         self.alarms = persistence.AlarmRecorder(self.writer)
         self.quality = persistence.QualityHistory(self.writer)
 
-    async def _make_credentials(self) -> dict[str, str]:
-        """Fresh random passwords for the stations' and the trains' caster accounts; returns each user's
-        password hash (hashed off the loop: scrypt takes tens of ms)."""
-        pw_station, pw_train = secrets.token_urlsafe(12), secrets.token_urlsafe(12)
-        self.credentials = {"station_user": STATION_USER, "station_password": pw_station,
-                            "train_user": TRAIN_USER, "train_password": pw_train}
-        h_station, h_train = await asyncio.get_running_loop().run_in_executor(
-            None, lambda: (hash_password(pw_station), hash_password(pw_train)))
-        return {STATION_USER: h_station, TRAIN_USER: h_train}
+    async def _make_credentials(self) -> dict[str, tuple[str | None, str, str]]:
+        """For the stations' and the trains' caster accounts: the password of the last state file (None
+        without one), a fresh random one and its hash (hashed off the loop: scrypt takes tens of ms)."""
+        from augnet.console.statefile import read_state
 
-    async def _register_run(self, stations, train_rx, hashes: dict[str, str]) -> dict[str, bool]:
-        """The run's stations, mountpoints and caster users into the store; returns each station's enabled
-        flag (an operator's earlier decision stands)."""
-        fut = self.writer.submit(lambda db: register_run(db, stations, train_rx, hashes))
-        return await asyncio.wrap_future(fut) or {}
+        last = read_state(self.settings.state_path).get("caster") or {}
+        last = last if isinstance(last, dict) else {}
+        known = {STATION_USER: last.get("station_password") if last.get("station_user") == STATION_USER else None,
+                 TRAIN_USER: last.get("password") if last.get("user") == TRAIN_USER else None}
+        fresh = {name: secrets.token_urlsafe(12) for name in known}
+        hashes = await asyncio.get_running_loop().run_in_executor(
+            None, lambda: {name: hash_password(pw) for name, pw in fresh.items()})
+        return {name: (k if isinstance(k, str) else None, fresh[name], hashes[name]) for name, k in known.items()}
+
+    async def _register_run(self, stations, seed, accounts) -> dict[str, bool]:
+        """The run's stations into the store, its caster users and mountpoints into an empty store; the
+        password each of the run's own accounts logs in with. Returns each station's enabled flag (an
+        operator's earlier decision stands)."""
+        fut = self.writer.submit(lambda db: register_run(db, stations, seed, accounts))
+        enabled, passwords = await asyncio.wrap_future(fut) or ({}, {})
+        for name in accounts:
+            if passwords.get(name) is None:
+                log.warning("caster user %s is missing or was changed by an operator: the run's own %s cannot "
+                            "log in to the caster until an operator restores it", name,
+                            "stations" if name == STATION_USER else "trains")
+        use = {name: passwords.get(name) or accounts[name][1] for name in accounts}
+        self.credentials = {"station_user": STATION_USER, "station_password": use[STATION_USER],
+                            "train_user": TRAIN_USER, "train_password": use[TRAIN_USER]}
+        return enabled
 
     def _make_centre(self, sc: Scenario, stations, enabled: dict[str, bool]) -> None:
         """The centre service, with the stations an operator disabled left out (its process starts later)."""
@@ -142,21 +160,32 @@ class System:
             if not on:
                 self.centre.set_station_enabled(code, False)
 
-    async def _start_caster(self, sc: Scenario, stations, train_rx, hashes: dict[str, str]) -> int:
-        """The caster with the centre as its VRS stream factory, each station's stream tapped into the
-        centre; returns its port."""
-        cfg = caster_config(self.settings, sc, stations, train_rx, hashes)
-        self.caster = Caster(cfg, {VRS_MOUNT: self.centre})
+    async def _start_caster(self, seed, stations, train_rx) -> int:
+        """The caster with the store's users and mountpoints (the scenario's `seed` completes their STR
+        records) and the centre as its VRS stream factory, each station's stream tapped into the centre;
+        returns its port. Its tables follow the store from then on (`caster_access.py`)."""
+        from augnet.system.caster_access import CasterAccessSync, caster_tables
+
+        described = {m.name: m for m in seed.mounts}
+        fut = self.writer.submit(lambda db: caster_tables(db, described))
+        users, mounts = await asyncio.wrap_future(fut) or ({}, [])
+        self.caster = Caster(replace(seed, users=users, mounts=tuple(mounts)), {VRS_MOUNT: self.centre})
         self.caster.on_alarm = self._alarm  # a bad-password flood is an operator's alarm (issue 19)
+        self.caster_access = CasterAccessSync(self.caster, self.sessions, described)
         port = await self.caster.start()
         for rx in stations:
-            self.caster.tap(rx.id, lambda data, code=rx.id: self.centre.feed(code, data))
+            try:
+                self.caster.tap(rx.id, lambda data, code=rx.id: self.centre.feed(code, data))
+            except ValueError:  # the store has no source mountpoint of that name: the centre gets no data
+                log.warning("station %s: no source mountpoint %s in the store; its data does not reach the centre",
+                            rx.id, rx.id)
         return port
 
     async def _start_bus(self) -> None:
         from augnet.bus import open_bus
 
         self.bus = await open_bus(self.settings.bus_url or None)
+        self.caster_access.bus = self.bus
 
     async def _start_rbc(self, stations) -> None:
         """The RSSP-I link to the RBC simulator (a line is needed: its sections are stretches of it)."""
@@ -181,7 +210,7 @@ class System:
         from augnet.console.app import create_app
 
         self.admin_token = await asyncio.get_running_loop().run_in_executor(None, self._console_admin_token)
-        app = create_app(self.sessions, self.publisher.live)
+        app = create_app(self.sessions, self.publisher.live, bus=self.bus)
 
         class _EmbeddedServer(uvicorn.Server):
             @contextlib.contextmanager
@@ -223,7 +252,10 @@ class System:
             tr = OnboardTrain(rx.id, lambda: world.nav, track_db, LOCALHOST, port, VRS_MOUNT,
                               user=TRAIN_USER, password=self.credentials["train_password"],
                               on_output=self._on_train_output, hold=self.centre.delivering)
-            self.caster.tap(mountpoint_of("train", rx.id), tr.on_rover_bytes)
+            try:
+                self.caster.tap(mountpoint_of("train", rx.id), tr.on_rover_bytes)
+            except ValueError:  # not in the store: the train runs without its raw stream
+                log.warning("train %s: no source mountpoint %s in the store", rx.id, mountpoint_of("train", rx.id))
             tr.start()
             self.trains[rx.id] = tr
             sid_future = self.writer.submit(lambda db, code=rx.id: persistence.open_train_session(db, code, VRS_MOUNT))
@@ -242,7 +274,10 @@ class System:
 
         state = {"console_url": self.console_url, "admin_token": self.admin_token,
                  "caster": {"host": LOCALHOST, "port": caster_port, "vrs_mount": VRS_MOUNT,
-                            "user": self.credentials["train_user"], "password": self.credentials["train_password"]},
+                            "user": self.credentials["train_user"], "password": self.credentials["train_password"],
+                            # kept for the next run over the same store (its own account's password)
+                            "station_user": self.credentials["station_user"],
+                            "station_password": self.credentials["station_password"]},
                  "scenario": self.settings.scenario, "pid": os.getpid()}
         if self.admin_password:
             state.update(admin_name=self.admin_name, admin_password=self.admin_password)
@@ -346,6 +381,8 @@ class System:
             await self.rbc.stop()
         if self.centre is not None:
             await self.centre.stop()
+        if self.caster_access is not None:
+            await self.caster_access.stop()
         if self.caster is not None:
             await self.caster.stop()
         if self.bus is not None:

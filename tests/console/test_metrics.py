@@ -99,6 +99,46 @@ def test_metrics_with_caster_snapshot(sqlite_console):
     assert value(s, "augnet_caster_clients") == 7
     assert value(s, "augnet_caster_mount_bytes_out_total", mount='A\\"B') == 10  # escaped per the format
     assert value(s, "augnet_caster_mount_bytes_out_total", mount="VRS") == 99
+    assert value(s, "augnet_caster_logins_total", outcome="failed") == 0 and value(s, "augnet_caster_auth_alarm") == 0
+
+
+def test_metrics_show_a_real_casters_counters(sqlite_console):
+    """Against a running caster: a wrong password, a throttled guesser, a good login, a source's bytes."""
+    from augwire.chunked import encode_chunk
+    from augwire.passwords import hash_password
+    from ntrip_caster.auth import User
+    from ntrip_caster.config import CasterConfig, Limits, MountConfig
+    from ntrip_caster.embedded import CasterThread
+    from ntrip_caster.throttle import FREE_FAILURES
+    from tests.ntrip.helpers import FAST, open_client, open_v2_source, read_all, wait_for
+
+    users = {"train1": User("train1", hash_password("train-pw", **FAST), frozenset({"trains"})),
+             "station1": User("station1", hash_password("station-pw", **FAST), frozenset({"stations"}))}
+    mounts = (MountConfig("BASE01", "source", frozenset({"trains"}), frozenset({"stations"})),)
+    config = CasterConfig(host="127.0.0.1", port=0, limits=Limits(), users=users, mounts=mounts)
+    with CasterThread(config, use_uvloop=False) as ct:
+        c = sqlite_console
+        c.live.caster_snapshot = ct.snapshot
+        src = open_v2_source(ct.port, "BASE01", "station1", "station-pw")
+        try:
+            wait_for(lambda: ct.snapshot()["mounts"]["BASE01"]["live"])
+            src.sendall(encode_chunk(b"\xd3\x00\x00\x47\xea\x4b"))  # an empty RTCM frame
+            ct.caster.clock = lambda: 1000.0  # the throttle's clock stands still: its lock does not expire
+            for _ in range(FREE_FAILURES + 2):  # past the free failures the next ones are refused unhashed
+                sock, _head = open_client(ct.port, "BASE01", version=2, user="train1", password="wrong")
+                read_all(sock)
+                sock.close()
+            wait_for(lambda: ct.snapshot()["mounts"]["BASE01"]["bytes_in"] > 0)
+            s = parse(c.client.get("/metrics").text)
+        finally:
+            src.close()
+    assert value(s, "augnet_caster_logins_total", outcome="failed") == FREE_FAILURES
+    assert value(s, "augnet_caster_logins_total", outcome="throttled") == 2
+    assert value(s, "augnet_caster_logins_total", outcome="succeeded") == 1  # the station's
+    assert value(s, "augnet_caster_responses_total", status="401") == FREE_FAILURES
+    assert value(s, "augnet_caster_responses_total", status="429") == 2
+    assert value(s, "augnet_caster_connections") >= 1 and value(s, "augnet_caster_clients") == 0
+    assert value(s, "augnet_caster_mount_bytes_in_total", mount="BASE01") > 0
 
 
 def test_route_labels_and_escaping():

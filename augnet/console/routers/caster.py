@@ -1,5 +1,9 @@
 """The NTRIP caster: its counters, mountpoints (the store's configuration merged with live statistics),
-connected clients, and caster users (admins manage them; password hashes never leave the store)."""
+connected clients, and caster users (admins manage them; password hashes never leave the store).
+
+Every change is committed (with its audit entry) first, then announced on the bus
+(`augnet.bus.config_events`), so that every running caster re-reads the store within a second (decision
+0180); an announcement lost is caught up by the casters' periodic reconcile."""
 
 from __future__ import annotations
 
@@ -8,7 +12,8 @@ import logging
 from fastapi import APIRouter, Request, Response, status
 from starlette.concurrency import run_in_threadpool
 
-from augnet.console.deps import Admin, DB, Key, Live, Viewer, field_error
+from augnet.bus.config_events import CasterChange, publish_change
+from augnet.console.deps import Admin, Key, Live, Viewer, field_error
 from augnet.console.live import LiveState, json_safe
 from augnet.console.schemas import (
     CasterOut,
@@ -32,6 +37,17 @@ def _check_format(value: str | None) -> None:
     parse of the table (ntrip_caster/sourcetable.py), so only printable ASCII without ';' is taken: 422."""
     if value is not None and not all(" " <= c <= "~" and c != ";" for c in value):
         raise field_error("format", "only printable ASCII without ';' (no line ends or control characters)")
+
+
+async def _announce(request: Request, kind: str, name: str, action: str) -> None:
+    """Tell the casters (on the bus, when this console has one) that `kind` `name` changed in the store."""
+    bus = request.app.state.bus
+    if bus is None:
+        return
+    try:
+        await publish_change(bus, CasterChange(kind, name, action))
+    except Exception:  # noqa: BLE001 - the change is stored; the casters' reconcile picks it up
+        log.warning("caster change of %s %s not announced on the bus", kind, name, exc_info=True)
 
 
 def _snapshot(live: LiveState) -> dict | None:
@@ -74,6 +90,15 @@ def _read(sessions, query, *args, **kwargs):
         return query(session, *args, **kwargs)
 
 
+def _write(sessions, change, *args, **kwargs):
+    """Run a store change (it writes its own audit entry) in its own session and commit it (in a worker
+    thread); the returned row stays readable (the factory does not expire on commit)."""
+    with sessions() as session:
+        out = change(session, *args, **kwargs)
+        session.commit()
+        return out
+
+
 # Routes that combine the store with the caster's snapshot are async: the snapshot is taken on the event
 # loop (where `augnet up` runs the caster, so its dicts are not read while they change); the store is read
 # in a worker thread.
@@ -90,16 +115,17 @@ async def mountpoints(who: Viewer, live: Live, request: Request) -> list[Mountpo
 
 @router.post("/mountpoints", response_model=MountpointOut, status_code=status.HTTP_201_CREATED,
              responses={409: {"description": "name taken"}})
-def add_mountpoint(body: MountpointIn, who: Admin, session: DB, live: Live) -> MountpointOut:
+async def add_mountpoint(body: MountpointIn, who: Admin, live: Live, request: Request) -> MountpointOut:
     _check_format(body.format)
-    mp = q.add_mountpoint(session, who.name, body.name, body.kind, body.format, body.read_groups, body.write_groups)
-    session.commit()
+    mp = await run_in_threadpool(_write, request.app.state.sessions, q.add_mountpoint, who.name, body.name,
+                                 body.kind, body.format, body.read_groups, body.write_groups)
     _tell_system(live, "mountpoint", mp.name, {"action": "add", **body.model_dump()})
+    await _announce(request, "mountpoint", mp.name, "add")
     return _mount_out(mp, mp.name, None)
 
 
 @router.patch("/mountpoints/{name}", response_model=MountpointOut, responses={404: {"description": "no such mountpoint"}})
-def edit_mountpoint(name: Key, body: MountpointPatch, who: Admin, session: DB, live: Live) -> MountpointOut:
+async def edit_mountpoint(name: Key, body: MountpointPatch, who: Admin, live: Live, request: Request) -> MountpointOut:
     given = body.model_dump(exclude_unset=True)
     if not given:
         raise field_error("kind", "give at least one field to change")
@@ -107,9 +133,9 @@ def edit_mountpoint(name: Key, body: MountpointPatch, who: Admin, session: DB, l
         if value is None:
             raise field_error(field, "may not be null")
     _check_format(given.get("format"))
-    mp = q.update_mountpoint(session, who.name, name, **given)
-    session.commit()
+    mp = await run_in_threadpool(_write, request.app.state.sessions, q.update_mountpoint, who.name, name, **given)
     _tell_system(live, "mountpoint", name, {"action": "edit", **given})
+    await _announce(request, "mountpoint", name, "edit")
     return _mount_out(mp, name, None)
 
 
@@ -142,10 +168,12 @@ async def users(who: Viewer, live: Live, request: Request) -> list[CasterUserOut
 
 @router.post("/users", response_model=CasterUserOut, status_code=status.HTTP_201_CREATED,
              responses={409: {"description": "name taken"}})
-def add_user(body: CasterUserIn, who: Admin, session: DB, live: Live) -> CasterUserOut:
-    u = q.add_caster_user(session, who.name, body.name, hash_password(body.password), body.groups)
-    session.commit()
+async def add_user(body: CasterUserIn, who: Admin, live: Live, request: Request) -> CasterUserOut:
+    password_hash = await run_in_threadpool(hash_password, body.password)  # scrypt: tens of ms, off the loop
+    u = await run_in_threadpool(_write, request.app.state.sessions, q.add_caster_user, who.name, body.name,
+                                password_hash, body.groups)
     _tell_system(live, "user", u.name, {"action": "add", "groups": u.groups, "password_hash": u.password_hash})
+    await _announce(request, "user", u.name, "add")
     return _user_out(u, {})
 
 
@@ -170,13 +198,14 @@ async def edit_user(name: Key, body: CasterUserPatch, who: Admin, live: Live, re
     u = await run_in_threadpool(_edit_user, request.app.state.sessions, who.name, name, given)
     _tell_system(live, "user", name, {"action": "edit", "groups": u.groups, "enabled": u.enabled,
                                       "password_hash": u.password_hash})
+    await _announce(request, "user", name, "edit")
     return _user_out(u, _client_counts(live))
 
 
 @router.delete("/users/{name}", status_code=status.HTTP_204_NO_CONTENT,
                responses={404: {"description": "no such user"}})
-def delete_user(name: Key, who: Admin, session: DB, live: Live) -> Response:
-    q.delete_caster_user(session, who.name, name)
-    session.commit()
+async def delete_user(name: Key, who: Admin, live: Live, request: Request) -> Response:
+    await run_in_threadpool(_write, request.app.state.sessions, q.delete_caster_user, who.name, name)
     _tell_system(live, "user", name, {"action": "delete"})
+    await _announce(request, "user", name, "delete")
     return Response(status_code=status.HTTP_204_NO_CONTENT)
