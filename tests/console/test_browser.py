@@ -354,4 +354,5 @@ def test_page_shows_history_charts_map_and_an_rbc_alarm(driver, sqlite_sessions,
         wait.until(lambda d: "rbc-correction-stale" in [b["text"] for b in boxes(d, row)])
         assert "RBC: corrections 6000 ms old" in text(driver, "#alarms tbody")
         driver.save_screenshot(str(tmp_path / "console-views.png"))
+        driver.find_element(By.ID, "geo").screenshot(str(tmp_path / "console-map.png"))
     writer.close()
