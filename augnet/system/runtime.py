@@ -38,6 +38,7 @@ from augnet.system.run_config import (STATION_USER, TRAIN_USER, VRS_MOUNT, caste
                                       scenario_for_run, station_along_km)
 from augnet.system.run_report import RunReport, run_report
 from augnet.system.settings import SystemSettings
+from augnet.system.train_alarms import TrainCorrectionWatch
 from augnet.system.trains import OnboardTrain
 from augwire.passwords import hash_password
 from ntrip_caster.server import Caster
@@ -80,6 +81,7 @@ class System:
         self.admin_password: str | None = None  # into the state file, never to stdout
         self.admin_password_created = False
         self.trains: dict[str, OnboardTrain] = {}
+        self.train_watch = TrainCorrectionWatch()  # a train's stale corrections are an operator's alarm
         self.train_sessions: dict[str, int] = {}
         self._tasks: list[asyncio.Task] = []
 
@@ -298,12 +300,15 @@ class System:
                              {code: (age if code in ne.present else None) for code in ne.stations})
 
     def _alarm(self, kind: str, subject: str, severity: str, message: str, cleared: bool) -> None:
-        """Every alarm (centre, caster, RBC) into the store; the pages are told once it is committed."""
+        """Every alarm (centre, caster, RBC, trains) into the store; the pages are told once it is committed."""
         self.alarms.record(kind, subject, severity, message, cleared,
                            on_stored=lambda: self.publisher.publish_alarm(kind, subject, severity, cleared))
 
     def _on_train_output(self, train: OnboardTrain, out) -> None:
         self.publisher.publish_train(train, out)
+        newest = train.last_base.time if train.last_base is not None else None
+        for event in self.train_watch.check(train.id, newest, gtime.now_gpst()):
+            self._alarm(*event)
 
     def _on_station_change(self, code: str, fields: dict) -> None:
         """An operator enabled or disabled a station in the console."""

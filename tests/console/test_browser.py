@@ -23,6 +23,7 @@ from augnet.system.history_series import series_values
 from augnet.system.live_state import LivePublisher
 from augnet.system.rbc_link import RbcConnection, SectionPlan
 from augnet.system.runtime import System
+from augnet.system.train_alarms import TrainCorrectionWatch
 from rssp1.messages import AlarmCode
 
 from tests.console.conftest import add_accounts
@@ -269,6 +270,9 @@ def test_page_shows_history_charts_map_and_an_rbc_alarm(driver, sqlite_sessions,
     add_accounts(sqlite_sessions)
     wait = WebDriverWait(driver, WAIT_S)
     writer = persistence.StoreWriter(sqlite_sessions)
+    driver.execute_cdp_cmd("Page.addScriptToEvaluateOnNewDocument", {"source": (
+        "window.__csp = []; document.addEventListener('securitypolicyviolation',"
+        " e => window.__csp.push(e.violatedDirective + ' ' + e.blockedURI));")})
 
     with ConsoleThread(create_app(sqlite_sessions, live)) as server:
         driver.get(server.url + "/")
@@ -342,7 +346,7 @@ def test_page_shows_history_charts_map_and_an_rbc_alarm(driver, sqlite_sessions,
         assert_apart(boxes(driver, "#geo-labels text"))
 
         # the RBC's correction-age watchdog fires: through the RBC link's alarm events and the system's alarm
-        # route (store write, then the live event) to the page
+        # route (System._alarm: store write, then the live event) to the page
         rbc = RbcConnection(SectionPlan(96.4, {"STA1": 0.0, "STA3": 96.4}), {"STA1": 101, "STA3": 103})
         rbc.rbc._watchdog(AlarmCode.CORRECTION_STALE, True, "corrections 6000 ms old")
         publisher = LivePublisher()
@@ -350,9 +354,15 @@ def test_page_shows_history_charts_map_and_an_rbc_alarm(driver, sqlite_sessions,
         system = NS(alarms=persistence.AlarmRecorder(writer), publisher=publisher)
         for event in rbc.rbc_alarm_events():
             System._alarm(system, *event)
-        row = '#alarms tr[data-alarm] td:nth-child(3)'
-        wait.until(lambda d: "rbc-correction-stale" in [b["text"] for b in boxes(d, row)])
+        kinds = '#alarms tr[data-alarm] td:nth-child(3)'
+        wait.until(lambda d: "rbc-correction-stale" in [b["text"] for b in boxes(d, kinds)])
         assert "RBC: corrections 6000 ms old" in text(driver, "#alarms tbody")
+        # and a train's: its newest corrections 8 s old
+        for event in TrainCorrectionWatch().check("T2", 1000.0, 1008.0):
+            System._alarm(system, *event)
+        wait.until(lambda d: "train-correction-stale" in [b["text"] for b in boxes(d, kinds)])
+        assert "train T2: corrections 8.0 s old" in text(driver, "#alarms tbody")
+        assert driver.execute_script("return window.__csp;") == []  # charts and map within the page's CSP
         driver.save_screenshot(str(tmp_path / "console-views.png"))
         driver.find_element(By.ID, "geo").screenshot(str(tmp_path / "console-map.png"))
     writer.close()

@@ -16,6 +16,7 @@ from augnet.system import persistence
 from augnet.system.history_series import series_values
 from augnet.system.live_state import LivePublisher
 from augnet.system.rbc_link import RbcConnection, SectionPlan
+from augnet.system.train_alarms import TrainCorrectionWatch
 from rssp1.messages import SectionStatus
 from tests.system.test_live_state import _epoch
 
@@ -144,3 +145,16 @@ def test_a_section_the_rbc_sees_do_not_use_is_an_alarm_until_it_is_usable_again(
     conn.centre.corrections_updated(3_000, produced_at_s=now)
     _step(conn, now, 4)
     assert [(e[1], e[4]) for e in _section_events(conn)] == [("section 2", False)]
+
+
+def test_a_train_whose_corrections_go_stale_raises_an_alarm_until_they_are_fresh():
+    watch = TrainCorrectionWatch(limit_s=5.0)
+    assert watch.check("T1", None, 1000.0) == []  # no corrections yet: starting, not judged
+    assert watch.check("T1", 999.0, 1000.0) == []
+    (kind, subject, severity, message, cleared), = watch.check("T1", 994.0, 1000.0)
+    assert (kind, subject, severity, cleared) == ("train-correction-stale", "train T1", "warning", False)
+    assert "6.0 s old" in message
+    assert watch.check("T1", 994.0, 1001.0) == []  # once per episode
+    assert watch.check("T2", 1000.5, 1001.0) == []  # each train on its own
+    assert [(e[1], e[4]) for e in watch.check("T1", 1000.0, 1001.0)] == [("train T1", True)]
+    assert watch.check("T1", 1000.0, 1001.0) == []
