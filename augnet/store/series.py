@@ -91,14 +91,14 @@ def series_buckets(session: Session, since: dt.datetime, until: dt.datetime, buc
     since_s = since.timestamp()
     raw = (t - since_s + EDGE_TOLERANCE_S) / width_s  # >= 0 in the window: truncation is the floor on both backends
     index = cast(raw, Integer) if session.get_bind().dialect.name == "sqlite" else cast(func.floor(raw), Integer)
-    subjects = select(QualitySample.subject).where(QualitySample.at >= since, QualitySample.at < until) \
-        .group_by(QualitySample.subject).order_by(QualitySample.subject).limit(max_series).subquery()
     v = QualitySample.fixed_fraction
     q = (select(QualitySample.subject, index.label("i"), func.avg(t), func.avg(v), func.min(v), func.max(v),
                 func.count())
-         .where(QualitySample.at >= since, QualitySample.at < until, QualitySample.subject.in_(select(subjects)))
+         .where(QualitySample.at >= since, QualitySample.at < until)
          .group_by(QualitySample.subject, "i").order_by(QualitySample.subject, "i"))
     out: dict[str, list[Bucket]] = {}
     for subject, _i, t_mean, mean, low, high, n in session.execute(q):
+        if subject not in out and len(out) >= max_series:
+            break  # ordered by subject: the rest are later subjects (one pass over the window, no subquery)
         out.setdefault(subject, []).append(Bucket(float(t_mean), float(mean), float(low), float(high), int(n)))
     return out

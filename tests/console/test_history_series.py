@@ -81,3 +81,13 @@ def test_window_and_points_are_bounded(sqlite_console, params, field):
 
 def test_the_series_need_a_login(sqlite_console):
     assert sqlite_console.client.get("/api/history/series").status_code == 401
+
+
+def test_at_most_max_series_subjects_alphabetically_first(sqlite_console):
+    seed(sqlite_console.sessions, n=30)
+    with sqlite_console.sessions() as s:
+        capped = series.series_buckets(s, UNTIL - dt.timedelta(hours=1), UNTIL, 10, max_series=2)
+    assert list(capped) == ["STA1", "STA1-STA2"]  # the station's own row counts; the API then drops it
+    with pytest.raises(ValueError):
+        with sqlite_console.sessions() as s:
+            series.series_buckets(s, UNTIL, UNTIL, 10, max_series=2)

@@ -28,6 +28,9 @@ const state = {
   pollTimer: null,
   renderQueued: false,
   dirty: new Set(),      // what changed since the last frame: "trains" alone is the frequent case
+  geo: null,             // the map's projection (geoProjection), from the stations and the line
+  history: null,         // the last /api/history/series answer
+  historyTimer: null,
 };
 
 const $ = (id) => document.getElementById(id);
@@ -93,7 +96,7 @@ function logout(tellServer) {
   state.token = null; state.me = null;
   sessionStorage.removeItem("augnet.token");
   if (state.ws) { state.ws.onclose = null; state.ws.close(); state.ws = null; }
-  clearTimeout(state.pollTimer);
+  clearTimeout(state.pollTimer); clearTimeout(state.historyTimer);
   $("main").hidden = true; $("login").hidden = false; $("logout").hidden = true; $("whoami").textContent = "";
   setFeed("offline");
 }
@@ -578,7 +581,7 @@ function placeGeoLabels() {
 // HISTORY_POINTS buckets of mean, min and max), drawn as inline SVG: the mean as a line, min..max as a band.
 
 const HISTORY_POINTS = 240;
-const HISTORY_REFRESH_MS = 10000;  // the history's cadence (persistence.QUALITY_INTERVAL_S)
+const HISTORY_REFRESH_MS = 10000;  // the history's cadence (persistence.QUALITY_INTERVAL_S): no sooner
 const CHART = { width: 460, height: 210, left: 50, right: 12, top: 10, bottom: 40, tickGapPx: 14 };
 const PALETTE = ["#1565c0", "#2e7d32", "#c62828", "#ef8f00", "#6a1b9a", "#00838f", "#5d4037", "#ad1457", "#558b2f", "#37474f"];
 const CHARTS = {
@@ -591,12 +594,16 @@ const TIME_STEPS_S = [60, 120, 300, 600, 900, 1800, 3600, 7200, 10800, 21600, 43
 const GAP_BUCKETS = 2.5;  // a series is broken where consecutive points are farther apart than this many buckets
 
 async function refreshHistory() {
+  clearTimeout(state.historyTimer);
   const windowS = Number($("history-window").value);
   try {
     const h = await api("GET", `/api/history/series?window_s=${windowS}&points=${HISTORY_POINTS}`);
     state.history = h;
     renderHistory();
   } catch (e) { console.warn(e); }
+  // again when a new point is due: every 10 s for the last hour, every 42 min for a week (a week's read
+  // costs the store about a second: docs/measured.md)
+  if (state.me) state.historyTimer = setTimeout(refreshHistory, Math.max(HISTORY_REFRESH_MS, 1000 * windowS / HISTORY_POINTS));
 }
 
 function niceStep(span, maxTicks) {
@@ -718,7 +725,6 @@ function boot() {
   if (m) history.replaceState(null, "", location.pathname);
   setInterval(() => { if (state.me) refreshAlarms(); }, ALARM_REFRESH_MS);
   setInterval(() => { if (state.me) refreshStations(); }, STATIONS_REFRESH_MS);
-  setInterval(() => { if (state.me) refreshHistory(); }, HISTORY_REFRESH_MS);
   $("history-window").addEventListener("change", () => { if (state.me) refreshHistory(); });
   setInterval(() => { if (state.me) renderTrains(); }, POLL_INTERVAL_MS);  // keeps "updated s ago" honest
   if (m) adopt(decodeURIComponent(m[1]));
