@@ -525,6 +525,8 @@ function renderGeoTrains() {
 // the least covered one. Stations are placed first (they do not move), then trains.
 const LABEL_SLOTS = [[1, 0], [-1, 0], [0, -1], [0, 1], [1, -1], [1, 1], [-1, -1], [-1, 1]];
 const LABEL_RINGS = [1, 2.2, 3.6];
+// Placement is quadratic in labels: past this many trains (a load test's fleet) they keep their tooltip only.
+const MAX_TRAIN_LABELS = 100;
 
 function overlapArea(a, b) {
   const w = Math.min(a.x + a.w, b.x + b.w) - Math.max(a.x, b.x), h = Math.min(a.y + a.h, b.y + b.h) - Math.max(a.y, b.y);
@@ -537,10 +539,15 @@ function placeGeoLabels() {
   const marks = [];
   const obstacles = [];
   for (const g of $("geo-stations").children) marks.push({ g, kind: "station", r: GEO.stationR, text: g.getAttribute("data-station") });
-  for (const g of $("geo-trains").children) marks.push({ g, kind: "train", r: GEO.trainR, text: g.getAttribute("data-train") });
+  const trains = [...$("geo-trains").children];
+  for (const g of trains.length <= MAX_TRAIN_LABELS ? trains : []) marks.push({ g, kind: "train", r: GEO.trainR, text: g.getAttribute("data-train") });
   for (const m of marks) {
     m.x = parseFloat(m.g.getAttribute("data-x")); m.y = parseFloat(m.g.getAttribute("data-y"));
     obstacles.push({ x: m.x - m.r, y: m.y - m.r, w: 2 * m.r, h: 2 * m.r });
+  }
+  for (const g of trains.length > MAX_TRAIN_LABELS ? trains : []) {  // unlabelled trains still block labels
+    const x = parseFloat(g.getAttribute("data-x")), y = parseFloat(g.getAttribute("data-y"));
+    obstacles.push({ x: x - GEO.trainR, y: y - GEO.trainR, w: 2 * GEO.trainR, h: 2 * GEO.trainR });
   }
   const out = [];
   for (const m of marks) {
