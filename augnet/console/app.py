@@ -1,7 +1,7 @@
 """The operator console: `create_app(sessions, live)` builds the FastAPI application.
 
 Routes (OpenAPI at /openapi.json, interactive docs at /docs):
-  /                     the web page (line diagram, trains, alarms) and /static/*
+  /                     the web page (line diagram, map, trains, alarms, history charts) and /static/*
   /api/auth/...         login (name + password -> Bearer token; throttled), session, logout, me
   /api/operators        accounts (admin)
   /api/stations         registry + live state; add / edit (admin), enable / disable (operator)
@@ -9,7 +9,7 @@ Routes (OpenAPI at /openapi.json, interactive docs at /docs):
   /api/trains, /api/trains/{id}
   /api/alarms, /api/alarms/{id}, /api/alarms/{id}/acknowledge (operator)
   /api/caster, /api/caster/mountpoints, /api/caster/clients, /api/caster/users (changes: admin)
-  /api/quality, /api/audit
+  /api/quality, /api/history/series (the charts' downsampled quality history), /api/audit
   /api/live (websocket), /api/live/snapshot
   /metrics (Prometheus text), /healthz
 

@@ -104,9 +104,11 @@ class LivePublisher:
 
     # --- alarms and trains --------------------------------------------------------------------------------
 
-    def publish_alarm(self, kind: str, subject: str, severity: str) -> None:
+    def publish_alarm(self, kind: str, subject: str, severity: str, cleared: bool = False) -> None:
+        """An alarm raised or cleared in the store (any thread): the pages re-read the alarms."""
         if self.live is not None:
-            self.live.publish({"type": "alarm", "kind": kind, "subject": subject, "severity": severity})
+            self.live.publish({"type": "alarm", "action": "cleared" if cleared else "raised", "kind": kind,
+                               "subject": subject, "severity": severity})
 
     def publish_train(self, train, out) -> None:
         """A train's solution (`UnitOutput`) to the live state, at most every `LIVE_PUBLISH_INTERVAL_S`."""

@@ -15,7 +15,7 @@ from typing import Callable
 from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
-from augnet.store import queries
+from augnet.store import queries, series
 from augnet.store.models import AuditEntry, CasterUser, Mountpoint, Severity, Station, Train, TrainSession, utcnow
 from augnet.system.baseline_quality import quality_rows
 from augwire.passwords import verify_password
@@ -134,9 +134,13 @@ def station_enabled_map(s: Session) -> dict[str, bool]:
     return {st.code: bool(st.enabled) for st in s.scalars(select(Station))}
 
 
-def record_quality_batch(s: Session, at: dt.datetime, rows: list[tuple[str, float, float | None, int]]) -> None:
+def record_quality_batch(s: Session, at: dt.datetime, rows: list[tuple[str, float, float | None, int]],
+                         values: dict[str, float] | None = None) -> None:
+    """The baselines' rows and the network's series values (augnet.store.series) of one history instant."""
     for subject, fixed, rms, sats in rows:
         queries.record_quality(s, at, subject, fixed, rms, sats)
+    for subject, value in (values or {}).items():
+        series.record_series(s, at, subject, value)
 
 
 # --- what the running network reports ------------------------------------------------------------------
@@ -150,13 +154,15 @@ class AlarmRecorder:
         self._open: set[tuple[str, str]] = set()
         self.log: list[dict] = []
 
-    def record(self, kind: str, subject: str, severity: str, message: str, cleared: bool) -> bool:
-        """Store a raise or a clear; True when this call raised a new alarm."""
+    def record(self, kind: str, subject: str, severity: str, message: str, cleared: bool,
+               on_stored: Callable[[], None] | None = None) -> bool:
+        """Store a raise or a clear; True when this call raised a new alarm. `on_stored()` runs on the
+        store's thread once the raise or clear is committed (the console's pages then read it at once)."""
         key = (kind, subject)
         if cleared:
             if key in self._open:
                 self._open.discard(key)
-                self.writer.submit(lambda db: queries.clear_alarm(db, kind, subject))
+                self._submit(lambda db: queries.clear_alarm(db, kind, subject), on_stored)
             return False
         if key in self._open:
             return False
@@ -164,23 +170,36 @@ class AlarmRecorder:
         self.log.append({"kind": kind, "subject": subject, "severity": severity, "message": message,
                          "at_utc": dt.datetime.now(dt.timezone.utc).isoformat()})
         sev = Severity(severity) if severity in {m.value for m in Severity} else Severity.WARNING
-        self.writer.submit(lambda db: queries.raise_alarm(db, kind, subject, sev, message))
+        self._submit(lambda db: queries.raise_alarm(db, kind, subject, sev, message), on_stored)
         return True
+
+    def _submit(self, fn: Callable[[Session], object], on_stored: Callable[[], None] | None) -> None:
+        def write(db: Session) -> bool:
+            fn(db)
+            return True  # StoreWriter returns None for a failed write: then nobody is told
+
+        future = self.writer.submit(write)
+        if on_stored is not None and future is not None:
+            future.add_done_callback(lambda f: f.result() and on_stored())
 
 
 class QualityHistory:
-    """The network's baselines into the quality history, one row each every `interval_s`."""
+    """The network's baselines and its series (correction age p99, trains fixed, station data age: decision
+    0185) into the quality history, one row each every `interval_s`."""
 
     def __init__(self, writer: StoreWriter, interval_s: float = QUALITY_INTERVAL_S):
         self.writer = writer
         self.interval_s = interval_s
         self._last_unix = 0.0
 
-    def on_epoch(self, network, now_unix: float) -> None:
-        """`network` is the epoch's `NetworkEpoch`; rows are written when `interval_s` has passed."""
+    def on_epoch(self, network, now_unix: float,
+                 series_values: Callable[[], dict[str, float]] | None = None) -> None:
+        """`network` is the epoch's `NetworkEpoch`; rows are written when `interval_s` has passed, with
+        `series_values()` (asked only then) giving the series' values {subject: value}."""
         if now_unix - self._last_unix < self.interval_s:
             return
         self._last_unix = now_unix
-        at = dt.datetime.now(dt.timezone.utc).replace(microsecond=0, tzinfo=None)
+        at = dt.datetime.fromtimestamp(now_unix, dt.timezone.utc).replace(microsecond=0, tzinfo=None)
         rows = quality_rows(network)
-        self.writer.submit(lambda db: record_quality_batch(db, at, rows))
+        values = series_values() if series_values is not None else {}
+        self.writer.submit(lambda db: record_quality_batch(db, at, rows, values))

@@ -9,9 +9,10 @@ sets every section's status from what the centre can vouch for there:
   DO_NOT_USE  neither is delivering, or no correction model at all (the RBC's own age watchdog also
               turns every section DO_NOT_USE when reports stop).
 Centre alarms (station down, satellite excluded) become RSSP-I alarms; the RBC simulator on the other
-end of a loopback UDP link shows what a real RBC would believe. The RBC's own watchdog alarms (corrections
-stale, link lost) come back to the centre's alarm store through `on_alarm` (`rbc-correction-stale`, ...),
-raised when the RBC raises them and cleared when it clears them, so the console shows every one.
+end of a loopback UDP link shows what a real RBC would believe. The RBC's own alarms, its watchdog's
+(corrections stale, link lost) and a section reported DO_NOT_USE, come back to the centre's alarm store
+through `on_alarm` (`rbc-correction-stale`, `rbc-section-do-not-use`, ...), raised when the RBC raises them
+and cleared when it clears them (or the section is usable again), so the console shows every one.
 """
 
 from __future__ import annotations
@@ -93,6 +94,7 @@ class RbcConnection:
         self.on_alarm = on_alarm  # on_alarm(kind, subject, severity, message, cleared), as the centre's
         self._watchdog_seen = 0  # RBC alarms already looked at
         self._watchdog_open: set[AlarmCode] = set()
+        self._sections_open: set[int] = set()  # sections whose DO_NOT_USE alarm is in the store
         self.plan = plan
         self.station_ids = station_ids
         self.centre = CentreRbcLink(Endpoint(CENTRE_DEVICE, RBC_DEVICE, LINK_TIMING),
@@ -114,13 +116,25 @@ class RbcConnection:
             self.tasks.append(asyncio.ensure_future(self._forward_alarms()))
 
     def rbc_alarm_events(self) -> list[tuple[str, str, str, str, bool]]:
-        """The RBC watchdog's alarms raised and cleared since the last call, as alarm-store events."""
+        """The RBC's own alarms raised and cleared since the last call, as alarm-store events: its watchdog's
+        (subject "rbc"), and a section reported DO_NOT_USE (subject "section <id>", cleared when the
+        section is reported usable again). Alarms the centre sent it are the centre's, stored already."""
         out = []
         for a in self.rbc.alarms[self._watchdog_seen:]:
             if a.origin == "watchdog" and a.code not in self._watchdog_open:
                 self._watchdog_open.add(a.code)
                 out.append((_rbc_kind(a.code), "rbc", "critical", f"RBC: {a.text}", False))
+            elif a.origin == "status" and a.section_id not in self._sections_open:
+                self._sections_open.add(a.section_id)
+                out.append((_rbc_kind(a.code), f"section {a.section_id}", "warning",
+                            f"RBC: section {a.section_id} reported DO_NOT_USE", False))
         self._watchdog_seen = len(self.rbc.alarms)
+        for sid in sorted(self._sections_open):
+            reported = self.rbc.view.reported.get(sid)
+            if reported is not None and reported.status is not SectionStatus.DO_NOT_USE:
+                self._sections_open.discard(sid)
+                out.append((_rbc_kind(AlarmCode.SECTION_DO_NOT_USE), f"section {sid}", "warning",
+                            "RBC: cleared", True))
         for code in sorted(self._watchdog_open, key=lambda c: c.value):
             name = code.name.lower()
             if self.rbc.stats[f"cleared_{name}"] >= self.rbc.stats[f"alarm_{name}"]:

@@ -29,14 +29,17 @@ import time
 from dataclasses import replace
 
 from augnet.centre.engine import SUBJECT_ALARMS, EpochReport
+from augnet.gnss import time as gtime
 from augnet.onboard.trackmap import TrackDatabase
 from augnet.system import persistence
 from augnet.system.centre_service import CentreService, CentreSpec
+from augnet.system.history_series import series_values
 from augnet.system.live_state import LivePublisher, make_live_state
 from augnet.system.run_config import (STATION_USER, TRAIN_USER, VRS_MOUNT, caster_config, register_run,
                                       scenario_for_run, station_along_km)
 from augnet.system.run_report import RunReport, run_report
 from augnet.system.settings import SystemSettings
+from augnet.system.train_alarms import TrainCorrectionWatch
 from augnet.system.trains import OnboardTrain
 from augwire.passwords import hash_password
 from ntrip_caster.server import Caster
@@ -80,6 +83,7 @@ class System:
         self.admin_password: str | None = None  # into the state file, never to stdout
         self.admin_password_created = False
         self.trains: dict[str, OnboardTrain] = {}
+        self.train_watch = TrainCorrectionWatch()  # a train's stale corrections are an operator's alarm
         self.train_sessions: dict[str, int] = {}
         self._tasks: list[asyncio.Task] = []
 
@@ -319,14 +323,27 @@ class System:
             self._alarm(a.kind, a.subject, a.severity, a.message, a.cleared)
         self.publisher.publish_network(r, self.centre, self.rbc)
         if self.quality is not None:
-            self.quality.on_epoch(ne, time.time())
+            self.quality.on_epoch(ne, time.time(), lambda: self._history_series(r))
+
+    def _history_series(self, r: EpochReport) -> dict[str, float]:
+        """The quality history's network series at this epoch (correction age p99, trains fixed, station
+        data age as the console shows it: now minus the epoch for a delivering station)."""
+        ne = r.network
+        age = max(0.0, gtime.now_gpst() - r.t_gpst)
+        states = [t.last.solution.status_name for t in self.trains.values() if t.last is not None]
+        return series_values(self.publisher.correction_age_s, states,
+                             {code: (age if code in ne.present else None) for code in ne.stations})
 
     def _alarm(self, kind: str, subject: str, severity: str, message: str, cleared: bool) -> None:
-        if self.alarms.record(kind, subject, severity, message, cleared):
-            self.publisher.publish_alarm(kind, subject, severity)
+        """Every alarm (centre, caster, RBC, trains) into the store; the pages are told once it is committed."""
+        self.alarms.record(kind, subject, severity, message, cleared,
+                           on_stored=lambda: self.publisher.publish_alarm(kind, subject, severity, cleared))
 
     def _on_train_output(self, train: OnboardTrain, out) -> None:
         self.publisher.publish_train(train, out)
+        newest = train.last_base.time if train.last_base is not None else None
+        for event in self.train_watch.check(train.id, newest, gtime.now_gpst()):
+            self._alarm(*event)
 
     def _on_station_change(self, code: str, fields: dict) -> None:
         """An operator enabled or disabled a station in the console."""

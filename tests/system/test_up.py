@@ -286,3 +286,6 @@ def test_the_store_holds_the_run(up_run):
     assert all(s[1] is not None and s[3] > 0 for s in sessions)
     n_quality = db.execute("select count(*) from quality_history").fetchone()[0]
     assert n_quality >= len(stations)  # a row per baseline every 10 s
+    subjects = {r[0] for r in db.execute("select distinct subject from quality_history")}
+    assert {"network:correction_age_p99_s", "trains:fixed", "trains:reporting",
+            "station:STA1:data_age_s"} <= subjects  # the charts' series at the same cadence (decision 0185)

@@ -1,7 +1,8 @@
 // augnet console page: no framework, no external assets.
 // Live state arrives over the websocket /api/live (a snapshot, then events); when the socket cannot be
-// kept open the page polls /api/live/snapshot instead and retries the socket. Alarms, stations and the
-// audit log are read over the REST API. Every value from the server is set with textContent, never HTML.
+// kept open the page polls /api/live/snapshot instead and retries the socket. Alarms, stations, the
+// quality history and the audit log are read over the REST API. The line diagram, the map and the history
+// charts are inline SVG drawn here. Every value from the server is set with textContent, never HTML.
 "use strict";
 
 const POLL_INTERVAL_MS = 1000;        // snapshot polling while the websocket is down
@@ -27,6 +28,9 @@ const state = {
   pollTimer: null,
   renderQueued: false,
   dirty: new Set(),      // what changed since the last frame: "trains" alone is the frequent case
+  geo: null,             // the map's projection (geoProjection), from the stations and the line
+  history: null,         // the last /api/history/series answer
+  historyTimer: null,
 };
 
 const $ = (id) => document.getElementById(id);
@@ -92,7 +96,7 @@ function logout(tellServer) {
   state.token = null; state.me = null;
   sessionStorage.removeItem("augnet.token");
   if (state.ws) { state.ws.onclose = null; state.ws.close(); state.ws = null; }
-  clearTimeout(state.pollTimer);
+  clearTimeout(state.pollTimer); clearTimeout(state.historyTimer);
   $("main").hidden = true; $("login").hidden = false; $("logout").hidden = true; $("whoami").textContent = "";
   setFeed("offline");
 }
@@ -118,6 +122,7 @@ function mergeLiveStation(st) {
   cur.live = { up: st.up, last_data_age_s: st.last_data_age_s, satellites: st.satellites };
   cur.rtcm_station_id = st.station_id;
   cur.enabled = st.enabled;
+  cur.lat_deg = st.lat_deg; cur.lon_deg = st.lon_deg;
   if (st.along_km !== null && st.along_km !== undefined) cur.along_km = st.along_km;
   state.stations.set(st.id, cur);
 }
@@ -225,8 +230,8 @@ function queueRender(part) {
 function render() {
   const all = state.dirty.has("all");
   state.dirty.clear();
-  if (all) { renderSummary(); renderStatic(); renderStations(); }
-  renderTrainMarkers(); renderTrains();
+  if (all) { renderSummary(); renderStatic(); renderStations(); renderGeoStatic(); }
+  renderTrainMarkers(); renderTrains(); renderGeoTrains();
 }
 
 // The centre's summary is free-form; these keys (first found of each group) make the header, the rest is in
@@ -405,13 +410,316 @@ function renderStations() {
   }));
 }
 
+// ---- geographic view ---------------------------------------------------------------------------------
+// Stations, baselines and trains on a local equirectangular projection of their WGS84 positions (x east,
+// y north, km from the centre of the stations' and the line's extent): over a line a few hundred km long
+// its distortion is far below a marker's size, and it needs no tile server.
+
+const EARTH_RADIUS_KM = 6378.137;  // WGS84 semi-major axis
+const GEO = { width: 1000, height: 520, margin: 48, stationR: 9, trainR: 7, labelGap: 4 };
+const SCALE_BAR_KM = [0.1, 0.2, 0.5, 1, 2, 5, 10, 20, 50, 100, 200, 500, 1000];
+const SCALE_BAR_MAX_PX = 160;
+
+function geoProjection() {
+  const pts = [];
+  for (const p of (state.line && state.line.polyline) || []) pts.push([p[0], p[1]]);
+  for (const s of state.stations.values()) if (s.lat_deg != null && s.lon_deg != null) pts.push([s.lat_deg, s.lon_deg]);
+  if (!pts.length) for (const t of state.trains.values()) pts.push([t.lat_deg, t.lon_deg]);
+  if (!pts.length) return null;
+  const lats = pts.map((p) => p[0]), lons = pts.map((p) => p[1]);
+  const lat0 = (Math.min(...lats) + Math.max(...lats)) / 2, lon0 = (Math.min(...lons) + Math.max(...lons)) / 2;
+  const k = EARTH_RADIUS_KM * Math.PI / 180, cosLat0 = Math.cos(lat0 * Math.PI / 180);
+  const xy = (lat, lon) => [(lon - lon0) * k * cosLat0, (lat - lat0) * k];
+  const km = pts.map((p) => xy(p[0], p[1]));
+  const spanX = Math.max(...km.map((p) => Math.abs(p[0]))) * 2, spanY = Math.max(...km.map((p) => Math.abs(p[1]))) * 2;
+  const scale = Math.min((GEO.width - 2 * GEO.margin) / Math.max(spanX, 1e-3), (GEO.height - 2 * GEO.margin) / Math.max(spanY, 1e-3));
+  const pxPerKm = Math.min(scale, 2000);  // one station alone: a sensible zoom, not an infinite one
+  const project = (lat, lon) => {
+    const [x, y] = xy(lat, lon);
+    return [GEO.width / 2 + x * pxPerKm, GEO.height / 2 - y * pxPerKm];
+  };
+  return { project, pxPerKm, lat0, lon0 };
+}
+
+function fixedFractionColour(f) {  // 0 red, 0.5 yellow, 1 green: a hue ramp
+  const x = Math.min(Math.max(Number(f) || 0, 0), 1);
+  return `hsl(${Math.round(120 * x)}, 70%, ${x > 0.75 ? 32 : 42}%)`;
+}
+
+function renderGeoStatic() {
+  const proj = geoProjection();
+  state.geo = proj;
+  if (!proj) { for (const id of ["geo-line", "geo-baselines", "geo-stations", "geo-furniture"]) $(id).replaceChildren(); return; }
+  const poly = ((state.line && state.line.polyline) || []).map((p) => proj.project(p[0], p[1]));
+  $("geo-line").replaceChildren(...(poly.length > 1 ? [svg("path", { class: "geo-line",
+    d: "M " + poly.map((p) => p[0].toFixed(1) + " " + p[1].toFixed(1)).join(" L ") })] : []));
+  const at = new Map();
+  const st = [];
+  for (const s of [...state.stations.values()].sort((a, b) => a.code.localeCompare(b.code))) {
+    if (s.lat_deg == null || s.lon_deg == null) continue;
+    const [x, y] = proj.project(s.lat_deg, s.lon_deg);
+    at.set(s.code, [x, y]);
+    const live = s.live || {};
+    const cls = s.enabled === false ? "disabled" : live.up ? "up" : "down";
+    const g = svg("g", { class: "geo-station " + cls, "data-station": s.code, "data-x": x.toFixed(1), "data-y": y.toFixed(1),
+      transform: `translate(${x.toFixed(1)},${y.toFixed(1)})` });
+    g.append(svg("polygon", { points: "0,-9 8,6 -8,6" }), svg("title", {}, `${s.code}: ${cls}, ${fmt(s.lat_deg, 5)}°, ${fmt(s.lon_deg, 5)}°`));
+    st.push(g);
+  }
+  $("geo-stations").replaceChildren(...st);
+  const bl = [];
+  for (const b of state.baselines) {
+    const pa = at.get(b.a), pb = at.get(b.b);
+    if (!pa || !pb) continue;
+    const attrs = { class: "geo-baseline " + b.state, "data-baseline": b.a + "-" + b.b, "data-fixed-fraction": String(b.fixed_fraction),
+      x1: pa[0].toFixed(1), y1: pa[1].toFixed(1), x2: pb[0].toFixed(1), y2: pb[1].toFixed(1) };
+    if (b.state !== "none") attrs.stroke = fixedFractionColour(b.fixed_fraction);
+    const line = svg("line", attrs);
+    line.append(svg("title", {}, `${b.a}–${b.b} ${fmt(b.length_km, 1)} km: fixed ${fmt(100 * b.fixed_fraction, 0)} %`));
+    bl.push(line);
+  }
+  $("geo-baselines").replaceChildren(...bl);
+  renderGeoFurniture(proj);
+  $("geo-caption").textContent = `centre ${fmt(proj.lat0, 3)}° ${fmt(proj.lon0, 3)}° · equirectangular`;
+}
+
+function renderGeoFurniture(proj) {
+  const km = [...SCALE_BAR_KM].reverse().find((k) => k * proj.pxPerKm <= SCALE_BAR_MAX_PX) || SCALE_BAR_KM[0];
+  const len = km * proj.pxPerKm, x0 = 20, y0 = GEO.height - 20;
+  const bar = svg("g", { class: "furniture", "data-scale-km": String(km), "data-scale-px": len.toFixed(1) });
+  bar.append(svg("path", { d: `M ${x0} ${y0 - 6} L ${x0} ${y0} L ${(x0 + len).toFixed(1)} ${y0} L ${(x0 + len).toFixed(1)} ${y0 - 6}` }),
+    svg("text", { x: x0 + len / 2, y: y0 - 9, "text-anchor": "middle" }, km + " km"));
+  const nx = GEO.width - 30, ny = 22;
+  const north = svg("g", { class: "furniture north" });
+  north.append(svg("polygon", { points: `${nx},${ny} ${nx - 8},${ny + 22} ${nx},${ny + 16} ${nx + 8},${ny + 22}` }),
+    svg("text", { x: nx, y: ny + 38, "text-anchor": "middle" }, "N"));
+  $("geo-furniture").replaceChildren(bar, north);
+}
+
+function renderGeoTrains() {
+  const proj = state.geo;
+  const layer = $("geo-trains");
+  if (!proj) { layer.replaceChildren(); $("geo-labels").replaceChildren(); return; }
+  const seen = new Set();
+  for (const t of state.trains.values()) {
+    if (t.lat_deg == null || t.lon_deg == null) continue;
+    seen.add(t.id);
+    let g = layer.querySelector(`g[data-train="${CSS.escape(t.id)}"]`);
+    if (!g) {
+      g = svg("g", { "data-train": t.id });
+      g.append(svg("circle", { r: GEO.trainR }), svg("title"));
+      layer.append(g);
+    }
+    const [x, y] = proj.project(t.lat_deg, t.lon_deg);
+    g.setAttribute("class", "geo-train " + t.fix_state);
+    g.setAttribute("transform", `translate(${x.toFixed(1)},${y.toFixed(1)})`);
+    g.setAttribute("data-x", x.toFixed(1)); g.setAttribute("data-y", y.toFixed(1));
+    g.querySelector("title").textContent = `${t.id}: ${t.fix_state}, ${fmt(t.lat_deg, 6)}°, ${fmt(t.lon_deg, 6)}°`;
+  }
+  for (const g of [...layer.children]) if (!seen.has(g.getAttribute("data-train"))) g.remove();
+  placeGeoLabels();
+}
+
+// Labels next to their markers without overlapping one another or any marker: each label tries eight
+// places around its marker, then the same farther out (with a leader line); the first free one wins, else
+// the least covered one. Stations are placed first (they do not move), then trains.
+const LABEL_SLOTS = [[1, 0], [-1, 0], [0, -1], [0, 1], [1, -1], [1, 1], [-1, -1], [-1, 1]];
+const LABEL_RINGS = [1, 2.2, 3.6];
+// Placement is quadratic in labels: past this many trains (a load test's fleet) they keep their tooltip only.
+const MAX_TRAIN_LABELS = 100;
+
+function overlapArea(a, b) {
+  const w = Math.min(a.x + a.w, b.x + b.w) - Math.max(a.x, b.x), h = Math.min(a.y + a.h, b.y + b.h) - Math.max(a.y, b.y);
+  return w > 0 && h > 0 ? w * h : 0;
+}
+
+function placeGeoLabels() {
+  const layer = $("geo-labels");
+  layer.replaceChildren();
+  const marks = [];
+  const obstacles = [];
+  for (const g of $("geo-stations").children) marks.push({ g, kind: "station", r: GEO.stationR, text: g.getAttribute("data-station") });
+  const trains = [...$("geo-trains").children];
+  for (const g of trains.length <= MAX_TRAIN_LABELS ? trains : []) marks.push({ g, kind: "train", r: GEO.trainR, text: g.getAttribute("data-train") });
+  for (const m of marks) {
+    m.x = parseFloat(m.g.getAttribute("data-x")); m.y = parseFloat(m.g.getAttribute("data-y"));
+    obstacles.push({ x: m.x - m.r, y: m.y - m.r, w: 2 * m.r, h: 2 * m.r });
+  }
+  for (const g of trains.length > MAX_TRAIN_LABELS ? trains : []) {  // unlabelled trains still block labels
+    const x = parseFloat(g.getAttribute("data-x")), y = parseFloat(g.getAttribute("data-y"));
+    obstacles.push({ x: x - GEO.trainR, y: y - GEO.trainR, w: 2 * GEO.trainR, h: 2 * GEO.trainR });
+  }
+  const out = [];
+  for (const m of marks) {
+    const t = svg("text", { class: "label-" + m.kind, "data-label-for": m.kind + ":" + m.text, x: 0, y: 0 }, m.text);
+    layer.append(t);  // measured where it is drawn (font as styled)
+    out.push([m, t]);
+  }
+  const placed = [];
+  for (const [m, t] of out) {
+    const bb = t.getBBox();
+    const w = bb.width, h = bb.height, ascent = -bb.y;  // bb.y: the box's top relative to the baseline
+    let best = null;
+    search: for (const ring of LABEL_RINGS) {
+      for (const [dx, dy] of LABEL_SLOTS) {
+        const d = (m.r + GEO.labelGap) * ring;
+        const cx = m.x + dx * d, cy = m.y + dy * d;
+        const box = { x: dx > 0 ? cx : dx < 0 ? cx - w : cx - w / 2, y: dy > 0 ? cy : dy < 0 ? cy - h : cy - h / 2, w, h };
+        const inside = box.x >= 0 && box.y >= 0 && box.x + w <= GEO.width && box.y + h <= GEO.height;
+        let cover = inside ? 0 : 1e9;
+        for (const o of obstacles) cover += overlapArea(box, o);
+        for (const p of placed) cover += overlapArea(box, p);
+        if (best === null || cover < best.cover) best = { box, cover, ring };
+        if (cover === 0) break search;
+      }
+    }
+    placed.push(best.box);
+    t.setAttribute("x", best.box.x.toFixed(1));
+    t.setAttribute("y", (best.box.y + ascent).toFixed(1));
+    if (best.ring > 1) {
+      const lx = Math.min(Math.max(m.x, best.box.x), best.box.x + w), ly = Math.min(Math.max(m.y, best.box.y), best.box.y + h);
+      layer.append(svg("line", { class: "leader", x1: m.x.toFixed(1), y1: m.y.toFixed(1), x2: lx.toFixed(1), y2: ly.toFixed(1) }));
+    }
+  }
+}
+
+// ---- history charts ----------------------------------------------------------------------------------
+// Series of the store's quality history (GET /api/history/series: the server downsamples each into at most
+// HISTORY_POINTS buckets of mean, min and max), drawn as inline SVG: the mean as a line, min..max as a band.
+
+const HISTORY_POINTS = 240;
+const HISTORY_REFRESH_MS = 10000;  // the history's cadence (persistence.QUALITY_INTERVAL_S): no sooner
+const CHART = { width: 460, height: 210, left: 50, right: 12, top: 10, bottom: 40, tickGapPx: 14 };
+const PALETTE = ["#1565c0", "#2e7d32", "#c62828", "#ef8f00", "#6a1b9a", "#00838f", "#5d4037", "#ad1457", "#558b2f", "#37474f"];
+const CHARTS = {
+  fixed_fraction: { axis: "fixed %", scale: 100, max: 100 },
+  correction_age_p99: { axis: "age s", scale: 1, max: null },
+  trains: { axis: "trains", scale: 1, max: null, integer: true },
+  station_data_age: { axis: "age s", scale: 1, max: null },
+};
+const TIME_STEPS_S = [60, 120, 300, 600, 900, 1800, 3600, 7200, 10800, 21600, 43200, 86400, 172800];
+const GAP_BUCKETS = 2.5;  // a series is broken where consecutive points are farther apart than this many buckets
+
+async function refreshHistory() {
+  clearTimeout(state.historyTimer);
+  const windowS = Number($("history-window").value);
+  try {
+    const h = await api("GET", `/api/history/series?window_s=${windowS}&points=${HISTORY_POINTS}`);
+    state.history = h;
+    renderHistory();
+  } catch (e) { console.warn(e); }
+  // again when a new point is due: every 10 s for the last hour, every 42 min for a week (a week's read
+  // costs the store about a second: docs/measured.md)
+  if (state.me) state.historyTimer = setTimeout(refreshHistory, Math.max(HISTORY_REFRESH_MS, 1000 * windowS / HISTORY_POINTS));
+}
+
+function niceStep(span, maxTicks) {
+  const raw = span / Math.max(maxTicks, 1), mag = Math.pow(10, Math.floor(Math.log10(raw)));
+  for (const m of [1, 2, 2.5, 5, 10]) if (m * mag >= raw) return m * mag;
+  return 10 * mag;
+}
+
+function utcLabel(tUnix, stepS) {
+  const iso = new Date(tUnix * 1000).toISOString();  // always UTC
+  return stepS >= 86400 ? iso.slice(5, 10) : stepS >= 43200 ? iso.slice(5, 10) + " " + iso.slice(11, 16) : iso.slice(11, 16);
+}
+
+function textWidth(host, s) {  // a label's drawn width in the chart's units
+  const t = svg("text", { x: 0, y: -100 }, s);
+  host.append(t);
+  const w = t.getBBox().width;
+  t.remove();
+  return w;
+}
+
+function renderHistory() {
+  const h = state.history;
+  if (!h) return;
+  const since = Date.parse(h.since) / 1000, until = Date.parse(h.until) / 1000;
+  $("history-caption").textContent = `${h.since.slice(0, 16).replace("T", " ")} – ${h.until.slice(0, 16).replace("T", " ")} UTC · a point per ${fmt(h.bucket_s, 0)} s`;
+  for (const kind of Object.keys(CHARTS)) {
+    drawChart(kind, h.series.filter((s) => s.kind === kind).sort((a, b) => a.label.localeCompare(b.label)), since, until, h.bucket_s);
+  }
+}
+
+function drawChart(kind, list, since, until, bucketS) {
+  const cfg = CHARTS[kind], host = $("chart-" + kind);
+  host.replaceChildren();
+  const x0 = CHART.left, x1 = CHART.width - CHART.right, y0 = CHART.height - CHART.bottom, y1 = CHART.top;
+  const xOfT = (t) => x0 + (x1 - x0) * (t - since) / (until - since);
+  let top = cfg.max;
+  if (top === null) {
+    top = 0;
+    for (const s of list) for (const p of s.points) top = Math.max(top, p[3] * cfg.scale);
+    top = top > 0 ? top * 1.1 : 1;
+  }
+  const yStep = cfg.integer ? Math.max(1, Math.ceil(niceStep(top, Math.floor((y0 - y1) / 22)))) : niceStep(top, Math.floor((y0 - y1) / 22));
+  top = Math.ceil(top / yStep - 1e-9) * yStep;
+  const yOf = (v) => y0 - (y0 - y1) * Math.min(Math.max(v * cfg.scale / top, 0), 1.02);
+  const nodes = [];
+  const digits = yStep >= 1 ? 0 : yStep >= 0.1 ? 1 : 2;
+  for (let v = 0; v <= top + 1e-9; v += yStep) {  // value axis: labels a row (>= 22 units) apart
+    const y = y0 - (y0 - y1) * v / top;
+    nodes.push(svg("line", { class: "grid", x1: x0, x2: x1, y1: y.toFixed(1), y2: y.toFixed(1) }),
+      svg("text", { class: "tick-y", x: x0 - 4, y: (y + 4).toFixed(1), "text-anchor": "end" }, v.toFixed(digits)));
+  }
+  nodes.push(svg("text", { class: "axis-title", x: 12, y: (y0 + y1) / 2, "text-anchor": "middle",
+    transform: `rotate(-90 12 ${((y0 + y1) / 2).toFixed(1)})` }, cfg.axis));
+  // time axis: the smallest step whose labels, measured in their format for that step, fit side by side
+  let stepS = TIME_STEPS_S[TIME_STEPS_S.length - 1], labelW = 0;
+  for (const s of TIME_STEPS_S) {
+    const w = textWidth(host, utcLabel(until, s)) + CHART.tickGapPx;
+    if ((until - since) / s <= Math.max(1, Math.floor((x1 - x0) / w))) { stepS = s; labelW = w; break; }
+  }
+  if (!labelW) labelW = textWidth(host, utcLabel(until, stepS)) + CHART.tickGapPx;
+  for (let t = Math.ceil(since / stepS) * stepS; t <= until; t += stepS) {
+    const x = xOfT(t);
+    if (x - x0 < labelW / 2 - CHART.tickGapPx / 2 || x1 - x < labelW / 2 - CHART.tickGapPx / 2) continue;  // would poke out
+    nodes.push(svg("line", { class: "axis", x1: x.toFixed(1), x2: x.toFixed(1), y1: y0, y2: y0 + 4 }),
+      svg("text", { class: "tick-x", x: x.toFixed(1), y: y0 + 16, "text-anchor": "middle" }, utcLabel(t, stepS)));
+  }
+  nodes.push(svg("text", { class: "axis-title", x: (x0 + x1) / 2, y: y0 + 32, "text-anchor": "middle" }, "time (UTC)"));
+  nodes.push(svg("line", { class: "axis", x1: x0, x2: x1, y1: y0, y2: y0 }), svg("line", { class: "axis", x1: x0, x2: x0, y1: y1, y2: y0 }));
+  const legend = [];
+  list.forEach((s, i) => {
+    const colour = PALETTE[i % PALETTE.length];
+    const runs = [[]];  // split at gaps
+    s.points.forEach((p, j) => {
+      if (j > 0 && p[0] - s.points[j - 1][0] > GAP_BUCKETS * Math.max(bucketS, 10)) runs.push([]);
+      runs[runs.length - 1].push(p);
+    });
+    const g = svg("g", { class: "series-group", "data-series": s.subject, "data-points": String(s.points.length) });
+    for (const run of runs) {
+      if (run.length > 1) {
+        const upper = run.map((p) => xOfT(p[0]).toFixed(1) + "," + yOf(p[3]).toFixed(1));
+        const lower = run.slice().reverse().map((p) => xOfT(p[0]).toFixed(1) + "," + yOf(p[2]).toFixed(1));
+        g.append(svg("polygon", { class: "band", fill: colour, points: upper.concat(lower).join(" ") }));
+      }
+      g.append(svg("polyline", { class: "series", stroke: colour, "data-points": String(run.length),
+        points: run.map((p) => xOfT(p[0]).toFixed(1) + "," + yOf(p[1]).toFixed(1)).join(" ") }));
+      if (run.length === 1) g.append(svg("circle", { r: 2, fill: colour, cx: xOfT(run[0][0]).toFixed(1), cy: yOf(run[0][1]).toFixed(1) }));
+    }
+    const last = s.points[s.points.length - 1];
+    g.append(svg("title", {}, `${s.label}: ${last ? fmt(last[1] * cfg.scale, 2) : "–"} ${cfg.axis} at ${last ? new Date(last[0] * 1000).toISOString().slice(11, 19) : "–"} UTC`));
+    nodes.push(g);
+    const item = el("span", { "data-series": s.subject });
+    const sw = svg("svg", { viewBox: "0 0 10 5" });
+    sw.append(svg("rect", { width: 10, height: 5, fill: colour }));
+    item.append(sw, s.label);
+    legend.push(item);
+  });
+  if (!list.length) nodes.push(svg("text", { class: "empty", x: (x0 + x1) / 2, y: (y0 + y1) / 2, "text-anchor": "middle" }, "no data in this window"));
+  host.append(...nodes);
+  $("legend-" + kind).replaceChildren(...legend);
+}
+
 // ---- start -------------------------------------------------------------------------------------------
 
 async function start() {
   try { state.me = await api("GET", "/api/auth/me"); } catch (e) { return; }
   $("login").hidden = true; $("main").hidden = false; $("logout").hidden = false;
   $("whoami").textContent = state.me.name + " (" + state.me.role + ")";
-  await Promise.all([refreshStations(), refreshAlarms(), refreshAudit()]);
+  await Promise.all([refreshStations(), refreshAlarms(), refreshAudit(), refreshHistory()]);
   connectFeed();
 }
 
@@ -424,6 +732,7 @@ function boot() {
   if (m) history.replaceState(null, "", location.pathname);
   setInterval(() => { if (state.me) refreshAlarms(); }, ALARM_REFRESH_MS);
   setInterval(() => { if (state.me) refreshStations(); }, STATIONS_REFRESH_MS);
+  $("history-window").addEventListener("change", () => { if (state.me) refreshHistory(); });
   setInterval(() => { if (state.me) renderTrains(); }, POLL_INTERVAL_MS);  // keeps "updated s ago" honest
   if (m) adopt(decodeURIComponent(m[1]));
   else if (state.token) start(); else $("login").hidden = false;
