@@ -255,7 +255,8 @@ class RbcSimulator:
             elif isinstance(msg, CorrectionAge):
                 self.view.correction_age_ms = msg.age_ms
                 limit = min(self.max_correction_age_ms, msg.max_age_ms)
-                self._watchdog(AlarmCode.CORRECTION_STALE, msg.age_ms > limit, f"corrections {msg.age_ms} ms old")
+                what = "no corrections yet" if msg.age_ms == AGE_UNKNOWN_MS else f"corrections {msg.age_ms} ms old"
+                self._watchdog(AlarmCode.CORRECTION_STALE, msg.age_ms > limit, what)
             elif isinstance(msg, Exclusions):
                 self.view.satellites, self.view.stations = msg.satellites, msg.stations
             elif isinstance(msg, Alarm):

@@ -274,3 +274,11 @@ def test_centre_restart_new_alarms_reach_the_rbc():
     net.step(TIMING.resync_bound_cycles + 4)
     texts = [a.text for a in rbc.alarms if a.code is AlarmCode.OPERATOR]
     assert texts == ["before restart", "after restart"] and restarted.unacked == {}
+
+
+def test_a_centre_without_corrections_yet_is_reported_as_such_not_as_a_huge_age():
+    centre, rbc, net = rbc_pair(max_correction_age_s=1.0)
+    centre.set_section(1, SectionStatus.OK)
+    net.step(4)  # reports flow, but the centre has produced no corrections
+    alarm = rbc.first_alarm(AlarmCode.CORRECTION_STALE)
+    assert alarm is not None and alarm.text == "no corrections yet", alarm
