@@ -96,7 +96,7 @@ class CasterAccessSync:
         self.events = 0  # change events received
         self.bad_events = 0  # payloads that were not a change event (logged, ignored)
         self.refreshes = 0  # store reads applied to the caster
-        self.failures = 0  # store reads that failed (the caster keeps its tables)
+        self.failures = 0  # store reads or applies that failed (the caster keeps its tables)
         self.applied: collections.deque[AppliedChange] = collections.deque(maxlen=APPLIED_LOG)
         self._reader = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="augnet-caster-access")
         self._task: asyncio.Task | None = None
@@ -115,8 +115,13 @@ class CasterAccessSync:
             self.failures += 1
             log.exception("caster tables not read from the store")
             return False
-        self.caster.set_mounts(mounts)
-        revoked = self.caster.set_users(users)
+        try:
+            self.caster.set_mounts(mounts)
+            revoked = self.caster.set_users(users)
+        except Exception:  # noqa: BLE001 - a bad row or a bug must not end the sync task: logged, retried
+            self.failures += 1
+            log.exception("caster tables not applied")
+            return False
         if revoked:
             log.info("caster users revoked: %s", ", ".join(sorted(revoked)))
         self.refreshes += 1
