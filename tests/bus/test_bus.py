@@ -86,3 +86,21 @@ def test_jetstream_bus_behaves_like_the_in_process_one():
 def test_unknown_bus_url_is_refused_with_the_url():
     with pytest.raises(BusError, match="redis://x"):
         asyncio.run(open_bus("redis://x"))
+
+
+@pytest.mark.skipif(not nats_available(), reason="no NATS server with JetStream at 127.0.0.1:4222")
+def test_caster_change_events_travel_on_jetstream():
+    from augnet.bus.config_events import CASTER_CONFIG_SUBJECT, CasterChange, decode_change, publish_change
+
+    async def main():
+        bus = await open_bus(NATS_URL)
+        try:
+            sub = await bus.subscribe(CASTER_CONFIG_SUBJECT)
+            sent = [CasterChange("user", "train", "edit"), CasterChange("mountpoint", "VRS", "edit")]
+            for change in sent:
+                await publish_change(bus, change)
+            got = [decode_change((await sub.next(timeout=5)).payload) for _ in sent]
+            assert got == sent
+        finally:
+            await bus.close()
+    asyncio.run(main())
