@@ -165,8 +165,8 @@ def test_1000_wrong_passwords_from_one_address_on_loopback():
 @pytest.mark.slow
 def test_300_concurrent_wrong_passwords_while_trains_stream():
     """300 guesses at once from 300 addresses (half at the trains' name, half at random names, which cost a
-    dummy hash each) while 10 trains stream BASE01: every train gets every frame the source sent."""
-    n_frames, n_trains = 300, 10
+    dummy hash each) while 100 trains stream BASE01: every train gets every frame the source sent."""
+    n_frames, n_trains = 300, 100
     frames = [frame((1005 << 4).to_bytes(2, "big") + i.to_bytes(4, "big") + bytes(40)) for i in range(n_frames)]
     sent = b"".join(frames)
     with CasterThread(make_config()) as ct:
@@ -219,6 +219,55 @@ def test_300_concurrent_wrong_passwords_while_trains_stream():
     assert c.get("auth_refused_throttled", 0) + c.get("auth_refused_busy", 0) > 0
     assert snap["auth_checks"] < 300
     assert AUTH_FLOOD_ALARM in [a[0] for a in alarms]
+
+
+@pytest.mark.slow
+def test_1000_wrong_passwords_from_one_address_while_100_trains_stream():
+    """The one-address flood of the first test (1,000 guesses in 10 s of the caster's stepped clock) while 100
+    trains stream BASE01: every train gets every frame, the guesses are refused 429 after a handful."""
+    n_frames, n_trains = 300, 100
+    frames = [frame((1005 << 4).to_bytes(2, "big") + i.to_bytes(4, "big") + bytes(40)) for i in range(n_frames)]
+    sent = b"".join(frames)
+    clock = SteppedClock()
+    with CasterThread(make_config()) as ct:
+        ct.caster.clock = clock
+        src = open_v1_source(ct.port, "BASE01", STATION_PW)
+        trains = []
+        for _ in range(n_trains):
+            s, head = open_client(ct.port, "BASE01", version=1)
+            assert head == b"ICY 200 OK\r\n"
+            trains.append(s)
+        received: list[bytes] = [b""] * n_trains
+
+        def read_train(k: int) -> None:
+            received[k] = read_exactly(trains[k], len(sent), timeout=HANG_GUARD_S)
+
+        readers = [threading.Thread(target=read_train, args=(k,)) for k in range(n_trains)]
+        for r in readers:
+            r.start()
+
+        def feed() -> None:
+            for f in frames:
+                src.sendall(f)
+                time.sleep(0.01)
+
+        feeder = threading.Thread(target=feed)
+        feeder.start()
+
+        def one(i: int) -> int:
+            clock.step(0.01)
+            return _status(_request(ct.port, "train1", f"guess-{i}", source_ip="127.0.0.77"))
+
+        with ThreadPoolExecutor(8) as pool:
+            statuses = list(pool.map(one, range(1000)))
+        feeder.join(HANG_GUARD_S)
+        for r in readers:
+            r.join(HANG_GUARD_S)
+        src.close()
+        for t in trains:
+            t.close()
+    assert all(r == sent for r in received), [len(r) for r in received]
+    assert statuses.count(429) >= 1000 - 2 * FREE_FAILURES and set(statuses) <= {401, 429}
 
 
 def test_pending_connections_per_address_are_bounded():
