@@ -289,10 +289,11 @@ class _Importer:
         return tuple(float(np.interp(pos, t.geo_pos, g[:, i])) for i in range(3))
 
     def _build(self):
-        for c in self.conns.values():
-            other = self.conns.get(c.ref)
-            if other is None:
+        for c in self.conns.values():  # missing refs first: the one-sided pair they leave is a consequence
+            if c.ref not in self.conns:
                 raise TopologyError(c.where, f"missing ref: {c.ref!r} names no connection")
+        for c in self.conns.values():
+            other = self.conns[c.ref]
             if other.ref != c.id:
                 raise TopologyError(c.where, f"ref {c.ref!r} names {other.where}, which refers back to {other.ref!r}")
             if c.owner == "switch" and other.owner == "switch":
