@@ -289,7 +289,7 @@ class Topology:
 
     def reachable(self, step: Step, distance_m: float, from_km: float | None = None) -> list[Step]:
         """Every edge (with its direction of travel) a train may reach within `distance_m` ahead,
-        starting at `from_km` on `step.edge` (default: its far end's opposite, i.e. the whole edge)."""
+        starting at `from_km` on `step.edge` (default: at the end it enters by, the whole edge ahead)."""
         e = self._edge(step.edge)
         _check_direction(step.direction)
         length = self.length_m(e.id)
