@@ -139,7 +139,8 @@ class _Importer:
         infra = root.find(self.q("infrastructure"))
         if infra is None:
             raise TopologyError("<railml>", "has no <infrastructure>")
-        ocps = {o.get("id", ""): o.get("name", o.get("id", "")) for o in infra.iterfind(self.q("operationControlPoints/ocp"))}
+        ocps = {o.get("id", ""): o.get("name", o.get("id", ""))
+                for o in infra.iterfind(self.q("operationControlPoints/ocp"))}
         track_els = infra.findall(self.q("tracks/track"))
         if not track_els:
             raise TopologyError("<infrastructure>", "has no <tracks>/<track>")
@@ -177,7 +178,8 @@ class _Importer:
             if t.kind == "loop" and t.el.find(self.q("trackElements/platformEdges/platformEdge")) is not None:
                 for _, _, eid in t.edges:
                     edges[eid] = _with_kind(edges[eid], "platform")
-        return Topology(infra.get("name", infra.get("id", "")), nodes.values(), edges.values(), turnouts, points, sections)
+        return Topology(infra.get("name", infra.get("id", "")), nodes.values(), edges.values(), turnouts, points,
+                        sections)
 
     # ------------------------------------------------------------------------------------------
 
@@ -187,7 +189,8 @@ class _Importer:
             raise TopologyError(_name(tel), "duplicate track id")
         ttype = tel.get("type", "")
         if ttype not in TRACK_TYPE_KIND:
-            raise TopologyError(_name(tel), f"type {ttype!r} is not one of {', '.join(k for k in TRACK_TYPE_KIND if k)}")
+            known = ", ".join(k for k in TRACK_TYPE_KIND if k)
+            raise TopologyError(_name(tel), f"type {ttype!r} is not one of {known}")
         t = _Track(tid, tel.get("name", ""), TRACK_TYPE_KIND[ttype], tel)
         topo = tel.find(self.q("trackTopology"))
         if topo is None:

@@ -38,6 +38,8 @@ DIRECTIONS = ("up", "down")  # up: increasing chainage
 # An edge end farther than this from its node's position is a geometry gap [m]: survey-grade maps
 # close to centimetres, 0.5 m catches a wrong coordinate without tripping on rounding.
 GEOMETRY_GAP_TOLERANCE_M = 0.5
+# Consecutive vertices closer than this [m] are one point given twice (a chord of no direction).
+MIN_SEGMENT_M = 0.001
 # A point of interest may sit this far outside its edge's chainage range [km] (rounding of mileage).
 CHAINAGE_TOLERANCE_KM = 1e-6
 # Standard gauge (UIC, 1435 mm): the frog's nose is where the inner rails cross, i.e. where the two
@@ -159,6 +161,10 @@ class Topology:
                 raise TopologyError(el, f"kind {e.kind!r} is not one of {', '.join(EDGE_KINDS)}")
             if not _edge_shape_ok(e):
                 raise TopologyError(el, "needs >= 2 finite [lat, lon, h] points and one finite km per point")
+            seg = np.linalg.norm(np.diff(self._ecef[e.id], axis=0), axis=1)
+            if np.any(seg < MIN_SEGMENT_M):
+                i = int(np.argmax(seg < MIN_SEGMENT_M))
+                raise TopologyError(el, f"points {i} and {i + 1} coincide ({seg[i]:.4f} m apart)")
             if np.any(np.diff(e.km) <= 0):
                 i = int(np.argmax(np.diff(e.km) <= 0))
                 raise TopologyError(el, f"chainage not increasing: km {e.km[i]:.6f} then {e.km[i + 1]:.6f} "
@@ -208,7 +214,8 @@ class Topology:
         for p in self.points.values():
             self._check_on_edge(f"point of interest {p.id}", p.edge, p.km)
             if p.kind not in POI_KINDS:
-                raise TopologyError(f"point of interest {p.id}", f"kind {p.kind!r} is not one of {', '.join(POI_KINDS)}")
+                raise TopologyError(f"point of interest {p.id}",
+                                    f"kind {p.kind!r} is not one of {', '.join(POI_KINDS)}")
             if p.direction not in ("", *DIRECTIONS):
                 raise TopologyError(f"point of interest {p.id}", f"direction {p.direction!r} is not up, down or empty")
         for s in self.sections.values():
@@ -265,6 +272,12 @@ class Topology:
 
     # ------------------------------------------------------------------------------------------
     # connectivity queries
+
+    def edges_at(self, node: str) -> list[tuple[str, str]]:
+        """The edge ends a node joins: (edge id, "begin" | "end")."""
+        if node not in self.nodes:
+            raise TopologyError(f"node {node}", "does not exist")
+        return list(self._ends[node])
 
     def node_ahead(self, step: Step) -> str:
         e = self._edge(step.edge)
@@ -498,8 +511,9 @@ def _feature(kind: str, coords: Any, props: dict[str, Any]) -> dict[str, Any]:
 
 def _edge_shape_ok(e: Edge) -> bool:
     p, k = e.points_llh, e.km
-    return (isinstance(p, np.ndarray) and p.ndim == 2 and p.shape[1] == 3 and len(p) >= 2 and bool(np.all(np.isfinite(p)))
-            and isinstance(k, np.ndarray) and k.shape == (len(p),) and bool(np.all(np.isfinite(k))))
+    return (isinstance(p, np.ndarray) and p.ndim == 2 and p.shape[1] == 3 and len(p) >= 2
+            and bool(np.all(np.isfinite(p))) and isinstance(k, np.ndarray) and k.shape == (len(p),)
+            and bool(np.all(np.isfinite(k))))
 
 
 def _unique(what: str, items: Iterable[Any]) -> dict[str, Any]:

@@ -126,7 +126,8 @@ def test_geometry_gap_is_refused_naming_the_edge(text):
 
 
 def test_decreasing_mileage_is_refused(text):
-    e = refused(text.replace('<trackEnd id="t1b_e" pos="4000" absPos="7000">', '<trackEnd id="t1b_e" pos="4000" absPos="2000">'))
+    e = refused(text.replace('<trackEnd id="t1b_e" pos="4000" absPos="7000">',
+                             '<trackEnd id="t1b_e" pos="4000" absPos="2000">'))
     assert e.element == "<track id='t1b'>" and "chainage not increasing" in e.reason
 
 
@@ -137,3 +138,20 @@ def test_bad_numbers_and_missing_geometry_are_refused(text):
     assert e.element == "<trackEnd id='t1c_e'>" and "geoCoord" in e.reason
     e = refused(text.replace('<ocp id="ocpB" name="Beta"/>', ""))
     assert e.element == "<crossSection id='cs2'>" and "ocpB" in e.reason
+
+
+def test_damaged_files_import_or_are_refused_never_crash(text):
+    """Truncated at every 37th byte, or with any one attribute removed: a Topology or a
+    TopologyError, nothing else."""
+    import re
+
+    cases = [text[:n] for n in range(0, len(text), 37)]
+    attrs = list(re.finditer(r'\s[A-Za-z]+="[^"]*"', text))
+    cases += [text[:m.start()] + text[m.end():] for m in attrs]
+    refusals = 0
+    for case in cases:
+        try:
+            topology_from_railml(case.encode())
+        except TopologyError:
+            refusals += 1
+    assert refusals >= len(cases) // 2  # every truncation is refused at least

@@ -52,6 +52,13 @@ def test_after_the_crossover_switch_track_1_or_2(topo):
     assert topo.tracks_after_next_switch(Step("t1b", "up")) == {"1", "3"}
 
 
+def test_edges_at_a_node(topo):
+    assert sorted(topo.edges_at("swB1")) == [("l3a", "begin"), ("t1c.0", "end"), ("t1c.1", "begin")]
+    assert topo.edges_at("bs1e") == [("t1c.2", "end")] and topo.nodes["bs1e"].kind == "buffer_stop"
+    with pytest.raises(TopologyError, match="node nowhere"):
+        topo.edges_at("nowhere")
+
+
 def test_no_route_from_straight_to_diverging(topo):
     # arriving at switch B2 on its straight leg, the loop's leg is no way on
     assert topo.next_steps(Step("t1c.1", "up")) == [Step("t1c.2", "up")]
@@ -145,3 +152,11 @@ def test_point_of_interest_off_its_edge_is_refused(d):
     p["km"] = 2.0  # bg1 sits on t1a.0, km 0-1.5
     e = refused(d)
     assert e.element == "point of interest bg1" and "outside edge t1a.0" in e.reason
+
+
+def test_repeated_point_is_refused(d):
+    edge = next(e for e in d["edges"] if e["id"] == "t1b")
+    edge["points"].insert(1, list(edge["points"][0]))
+    edge["km"].insert(1, edge["km"][0] + 1e-4)
+    e = refused(d)
+    assert e.element == "edge t1b" and "points 0 and 1 coincide" in e.reason
