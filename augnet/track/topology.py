@@ -307,22 +307,25 @@ class Topology:
         _check_direction(step.direction)
         length = self.length_m(e.id)
         if from_km is None:
-            remaining = distance_m
+            remaining = distance_m - length
         else:
             s = self.along_m(e.id, from_km)
             remaining = distance_m - ((length - s) if step.direction == "up" else s)
-        out, seen = [step], {step}
-        frontier = [(step, remaining)]
+        # best distance left at the far end of each step: a step reached again with more left is
+        # walked again (the first path to it need not be the shortest)
+        best = {step: remaining}
+        frontier = [step]
         while frontier:
-            cur, left = frontier.pop()
+            cur = frontier.pop()
+            left = best[cur]
             if left <= 0:
                 continue
             for nxt in self.next_steps(cur):
-                if nxt not in seen:
-                    seen.add(nxt)
-                    out.append(nxt)
-                    frontier.append((nxt, left - self.length_m(nxt.edge)))
-        return out
+                after = left - self.length_m(nxt.edge)
+                if nxt not in best or after > best[nxt]:
+                    best[nxt] = after
+                    frontier.append(nxt)
+        return list(best)
 
     def tracks_after_next_switch(self, step: Step) -> set[str]:
         """Tracks a train on `step` may be on once past the next switch ahead (joints are passed

@@ -71,6 +71,12 @@ def test_loop_track_rejoins(topo):
     topo.check_route(route)
     ahead = topo.reachable(Step("l3a", "up"), 1100.0)
     assert Step("t1c.2", "up") in ahead and all(topo.edges[s.edge].track in ("1", "3") for s in ahead)
+    # from km 7.9 on track 1, 150 m ahead: over switch B1 onto the loop's first piece or on along track 1;
+    # 250 m ahead also the loop's platform road (100 m to the switch + the 100 m turnout road)
+    near = topo.reachable(Step("t1c.0", "up"), 150.0, from_km=7.9)
+    assert set(near) == {Step("t1c.0", "up"), Step("l3a", "up"), Step("t1c.1", "up")}
+    assert Step("l3b", "up") in topo.reachable(Step("t1c.0", "up"), 250.0, from_km=7.9)
+    assert set(topo.reachable(Step("t1c.0", "up"), 50.0, from_km=7.9)) == {Step("t1c.0", "up")}
     # distance along the loop from km 7.5 to km 9.5: 500 m + the loop's three pieces + 500 m
     loop_m = sum(topo.length_m(e) for e in ("l3a", "l3b", "l3c"))
     assert topo.route_distance_m(route, "t1c.2", 9.5, start_km=7.5) == pytest.approx(500 + loop_m + 500, abs=0.05)
