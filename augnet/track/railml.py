@@ -316,6 +316,8 @@ class _Importer:
                                   np.array([self._km(t, p) for p in pos]))
                 t.edges.append((p0, p1, eid))
             for p, sid in t.switches:
+                if sid in nodes:  # railML ids are xs:ID, unique in the document
+                    raise TopologyError(f"<switch id={sid!r}>", "id also names another node")
                 nodes[sid] = Node(sid, "switch", self._llh(t, p))
         turnouts = [self._turnout(sid, edges) for sid in self.switch_pos]
         for e in list(edges.values()):
@@ -328,7 +330,7 @@ class _Importer:
         pos = t.begin_pos if side == "begin" else t.end_pos
         if (t.id, side) in self.end_kind:
             kind, nid = self.end_kind[(t.id, side)]
-            if nid in nodes:
+            if nid in nodes or nid in self.switch_pos:
                 raise TopologyError(f"<{kind}> {nid}", "duplicate id")
             nodes[nid] = Node(nid, kind, self._llh(t, pos))
             return nid

@@ -155,3 +155,8 @@ def test_damaged_files_import_or_are_refused_never_crash(text):
         except TopologyError:
             refusals += 1
     assert refusals >= len(cases) // 2  # every truncation is refused at least
+
+
+def test_an_id_naming_two_nodes_is_refused(text):
+    e = refused(text.replace('<bufferStop id="bs1e"/>', '<bufferStop id="swB2"/>'))
+    assert "swB2" in e.element and "duplicate id" in e.reason
