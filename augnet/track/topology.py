@@ -149,6 +149,12 @@ class Topology:
         self._validate()
         self._arc = {eid: np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(x, axis=0), axis=1))])
                      for eid, x in self._ecef.items()}
+        # every chord of every edge in one array, for nearest_edges (one numpy pass per position)
+        ids = list(self.edges)
+        self._seg_edge = np.concatenate([np.full(len(self._ecef[i]) - 1, k) for k, i in enumerate(ids)])
+        self._seg_a = np.concatenate([self._ecef[i][:-1] for i in ids])
+        self._seg_d = np.concatenate([np.diff(self._ecef[i], axis=0) for i in ids])
+        self._seg_ids = ids
 
     # ------------------------------------------------------------------------------------------
     # validation
@@ -267,8 +273,13 @@ class Topology:
 
     def nearest_edges(self, position_ecef_m, radius_m: float) -> list[NearestPoint]:
         """Every edge passing within `radius_m` of a position, nearest first."""
-        hits = [self.nearest_point(eid, position_ecef_m) for eid in self.edges]
-        return sorted((h for h in hits if h.distance_m <= radius_m), key=lambda h: h.distance_m)
+        p = np.asarray(position_ecef_m, dtype=float)
+        a, d = self._seg_a, self._seg_d
+        t = np.clip(np.einsum("ij,ij->i", p - a, d) / np.einsum("ij,ij->i", d, d), 0.0, 1.0)
+        dist = np.linalg.norm(a + t[:, None] * d - p, axis=1)
+        near = np.unique(self._seg_edge[dist <= radius_m])
+        hits = [self.nearest_point(self._seg_ids[k], p) for k in near]
+        return sorted(hits, key=lambda h: h.distance_m)
 
     # ------------------------------------------------------------------------------------------
     # connectivity queries

@@ -102,6 +102,9 @@ def test_nearest_point_between_the_main_tracks(topo):
     near = topo.nearest_edges(enu(8500.0, -4.0), radius_m=5.0)  # 0.6 m from the loop, 4 m from track 1
     assert [h.edge for h in near] == ["l3b", "t1c.1"]
     assert near[0].distance_m == pytest.approx(0.6, abs=0.05) and near[0].km == pytest.approx(8.5, abs=0.01)
+    assert topo.nearest_edges(enu(5000.0, 30.0), radius_m=10.0) == []
+    mid = topo.nearest_edges(enu(1530.0, 2.3), radius_m=3.0)  # on the crossover, 2.3 m from either main track
+    assert mid[0].edge == "x12" and mid[0].distance_m < 0.05 and {h.edge for h in mid[1:]} == {"t1a.1", "t2a.0"}
 
 
 def test_adapter_to_the_track_database(topo):
