@@ -20,8 +20,14 @@ common in proportion to both distances:
 * `residual_weighted_median`: weights 1 / C_hh, further down-weighted (Huber) by each estimate's normalised
   residual to the weighted median, var(x_i - x_k) = C_ii + C_kk - 2 C_ik (the correlation enters here).
 
-A window method's PL is K times the standard deviation of the estimate it selected (railway.md: "protection
-levels come from the variance bound of the selected estimate"). Before a fix enters the window it must
+A window method's PL is the smallest bound b = K sigma_i such that the estimates with K sigma_i <= b carry more
+than half the median's weight: if those are within their bounds, more than half the weight lies within b of
+the truth, and so does the (weighted) median, whatever the other estimates do (railway.md: "protection levels
+come from the variance bound of the selected estimate"; this is that bound made robust to the estimates the
+median outvotes). K per estimate for now; splitting the risk over the window's estimates is issue 15's
+integrity allocation. When this epoch's fix passed the residual check and bounds tighter on its own, it is the
+output (its integrity is GNSS + RAIM's plus the check against the odometry): the median protects, the newest
+checked fix gives the precision. Before a fix enters the window it must
 pass a residual check against the prediction (last output + odometer increment); a rejected fix widens that
 epoch's PL to cover the window's separation from it (either may be the faulty one); `LOCKOUT_REJECTIONS`
 rejections in a row mean the prediction, not the fixes, is wrong (an odometer slide): alarm, window
@@ -154,18 +160,18 @@ class AlongTrackFusion:
         cov[np.diag_indices_from(cov)] += sig ** 2 + q2
         return x, cov
 
-    def _select(self, x: np.ndarray, cov: np.ndarray) -> int:
+    def _weights(self, x: np.ndarray, cov: np.ndarray) -> np.ndarray:
         var = np.diag(cov)
         if self.method == "median":
-            return weighted_median(x, np.ones_like(x))
+            return np.ones_like(x)
         w = 1.0 / var
-        k = weighted_median(x, w)
         if self.method == "weighted_median":
-            return k
+            return w
+        k = weighted_median(x, w)
         dvar = np.maximum(var + var[k] - 2.0 * cov[:, k], 1e-12)
         r = np.abs(x - x[k]) / np.sqrt(dvar)
         r[k] = 0.0
-        return weighted_median(x, w * np.minimum(1.0, self.settings.huber_c / np.maximum(r, 1e-12)))
+        return w * np.minimum(1.0, self.settings.huber_c / np.maximum(r, 1e-12))
 
     # --- one epoch --------------------------------------------------------------------------------
 
@@ -211,10 +217,13 @@ class AlongTrackFusion:
         if not self.window or odometer is None:
             return self._output(now, math.nan, math.inf, 0, rejected, not entered, lockout)
         x, cov = self.estimates(now, odometer.pulses)
-        k = self._select(x, cov)
-        var = float(cov[k, k])
-        self._last = (now, odometer.pulses, float(x[k]), var)
-        pl = self.k * math.sqrt(var)
+        w = self._weights(x, cov)
+        k = weighted_median(x, w)
+        sigma = np.sqrt(np.diag(cov))
+        pl = self.k * float(sigma[weighted_median(sigma, w)])  # the median bound (module docstring)
+        if entered and self.k * sigma[-1] < pl:
+            k, pl = len(x) - 1, self.k * float(sigma[-1])  # this epoch's checked fix bounds tighter on its own
+        self._last = (now, odometer.pulses, float(x[k]), (pl / self.k) ** 2)
         if rejected:
             # Either the fix or the carried window is faulty (one fault at a time): bound both cases.
             pl = max(pl, abs(float(x[k]) - fix.position_m) + self.k * fix.sigma_m)
