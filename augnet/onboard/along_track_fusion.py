@@ -106,6 +106,7 @@ class FusedPosition:
     n_estimates: int  # estimates in the window (1 for gnss_raim with a fix)
     rejected: bool  # this epoch's fix failed the residual check
     odometry_only: bool  # no fix entered this epoch: the position is carried by odometry
+    from_fix: bool = False  # a window method output this epoch's checked fix (it bounded tighter than the median)
 
 
 @dataclass(frozen=True)
@@ -221,13 +222,14 @@ class AlongTrackFusion:
         k = weighted_median(x, w)
         sigma = np.sqrt(np.diag(cov))
         pl = self.k * float(sigma[weighted_median(sigma, w)])  # the median bound (module docstring)
-        if entered and self.k * sigma[-1] < pl:
+        from_fix = bool(entered and self.k * sigma[-1] < pl)
+        if from_fix:
             k, pl = len(x) - 1, self.k * float(sigma[-1])  # this epoch's checked fix bounds tighter on its own
         self._last = (now, odometer.pulses, float(x[k]), (pl / self.k) ** 2)
         if rejected:
             # Either the fix or the carried window is faulty (one fault at a time): bound both cases.
             pl = max(pl, abs(float(x[k]) - fix.position_m) + self.k * fix.sigma_m)
-        return self._output(now, float(x[k]), pl, len(x), rejected, not entered, lockout)
+        return self._output(now, float(x[k]), pl, len(x), rejected, not entered, lockout, from_fix)
 
     def _passes(self, now: float, odometer: OdometerSample | None, fix: AlongTrackFix) -> bool:
         if self._last is None or odometer is None:
@@ -243,8 +245,8 @@ class AlongTrackFusion:
             return self._output(now, math.nan, math.inf, 0, False, True, False)
         return self._output(now, fix.position_m, self.k * fix.sigma_m, 1, False, False, False)
 
-    def _output(self, now, x, pl, n, rejected, odometry_only, lockout) -> FusedPosition:
+    def _output(self, now, x, pl, n, rejected, odometry_only, lockout, from_fix=False) -> FusedPosition:
         available = bool(math.isfinite(x) and pl < self.settings.alert_limit_m)
         alarm = bool(lockout or (self._was_available and not available))
         self._was_available = available
-        return FusedPosition(now, self.method, x, pl, available, alarm, n, rejected, odometry_only)
+        return FusedPosition(now, self.method, x, pl, available, alarm, n, rejected, odometry_only, from_fix)
