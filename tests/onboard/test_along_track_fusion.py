@@ -121,3 +121,17 @@ def test_bad_input_is_refused_or_ignored():
     assert not out.available and f.window == []
     out = f.step(2.0, OdometerSample(2.0, 200), AlongTrackFix(2.0, math.nan, 0.05))  # NaN fix: no fix
     assert not out.available
+
+
+def test_median_bound_holds_whatever_the_outvoted_estimates_do():
+    """The PL claim (module docstring): if the estimates within the bound b hold over half the weight and
+    are within their own bounds, the weighted median is within b of the truth, the others arbitrary."""
+    rng = np.random.default_rng(11)
+    for _ in range(500):
+        n = int(rng.integers(1, 30))
+        bound = rng.uniform(0.05, 5.0, n)
+        w = 1.0 / bound ** 2 if rng.random() < 0.5 else rng.uniform(0.1, 1.0, n)
+        b = bound[weighted_median(bound, w)]
+        inside = bound <= b
+        x = np.where(inside, rng.uniform(-1, 1, n) * bound, rng.normal(0, 100, n))  # outside: any fault
+        assert abs(x[weighted_median(x, w)]) <= b + 1e-12
