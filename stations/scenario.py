@@ -142,6 +142,10 @@ class Train(_Strict):
     decel_m_s2: float = Field(default=0.7, gt=0.0, le=2.0)  # service brake
     antenna_height_m: float = Field(default=4.2, ge=0.0, le=6.0)  # above rail level (roof)
     grade: Literal["geodetic", "train"] = "train"
+    # Odometer (stations/odometer.py): true wheel radius minus the calibrated one, relative [%] (fixed per
+    # train: wear between calibrations), and the tachometer's pulses per wheel revolution.
+    wheel_radius_error_pct: float = Field(default=0.0, ge=-3.0, le=3.0)
+    odometer_pulses_per_rev: int = Field(default=200, ge=1, le=10_000)
 
 
 class Ionosphere(_Strict):
@@ -203,12 +207,14 @@ class Errors(_Strict):
 
 
 class Fault(_Strict):
-    kind: Literal["satellite_clock_step", "station_outage"]
+    kind: Literal["satellite_clock_step", "station_outage", "odometer_slide"]
     at_s: float = Field(ge=0.0)  # since start
     until_s: float | None = Field(default=None, ge=0.0)
     satellite: str | None = Field(default=None, pattern=r"^[GEC][0-9]{2}$")
     station: str | None = None
     step_ns: float = 0.0
+    train: str | None = None  # odometer_slide: the train whose wheels slide
+    slide_fraction: float = Field(default=0.0, ge=0.0, le=1.0)  # wheel speed lost to the slide (1: locked)
 
     @model_validator(mode="after")
     def _complete(self):
@@ -216,6 +222,11 @@ class Fault(_Strict):
             raise ValueError("satellite_clock_step needs satellite (e.g. G05)")
         if self.kind == "station_outage" and self.station is None:
             raise ValueError("station_outage needs station (a station id)")
+        if self.kind == "odometer_slide":
+            if self.train is None or self.until_s is None or not self.slide_fraction > 0.0:
+                raise ValueError("odometer_slide needs train, until_s and slide_fraction > 0")
+            if self.until_s <= self.at_s:
+                raise ValueError(f"odometer_slide: until_s ({self.until_s}) must be after at_s ({self.at_s})")
         return self
 
 
@@ -236,6 +247,8 @@ class Scenario(_Strict):
     trains: list[Train] = Field(default_factory=list)
     errors: Errors = Errors()
     faults: list[Fault] = Field(default_factory=list)
+    # Rail surface along the whole line: wet rail has less adhesion, so more wheel slip and slide (odometer).
+    rail: Literal["dry", "wet"] = "dry"
     # Seconds between 1005/1006 + 1033, and between periodic ephemeris repeats, in the RTCM stream.
     rtcm_station_interval_s: float = Field(default=5.0, gt=0.0)
     rtcm_ephemeris_interval_s: float = Field(default=30.0, gt=0.0)
@@ -288,6 +301,10 @@ class Scenario(_Strict):
         for f in self.faults:
             if f.station is not None and f.station not in station_ids:
                 raise ValueError(f"fault names station {f.station!r}; stations are {sorted(station_ids)}")
+        train_ids = {t.id for t in self.trains}
+        for f in self.faults:
+            if f.train is not None and f.train not in train_ids:
+                raise ValueError(f"fault names train {f.train!r}; trains are {sorted(train_ids)}")
         if self.line is not None:
             for t in self.trains:
                 if t.track > self.line.tracks:

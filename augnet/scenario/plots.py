@@ -26,6 +26,7 @@ from augnet.scenario.metrics import runs
 
 ERROR_OVER_TIME_PNG = "error_over_time.png"
 STANFORD_PNG = "stanford.png"
+STANFORD_ALONG_PNG = "stanford_along_{method}.png"  # one per along-track method (decision 0201)
 NETWORK_MAP_PNG = "network_map.png"
 DPI = 110
 STATUS_COLOURS = {Status.FIX: "tab:green", Status.FLOAT: "tab:orange", Status.SINGLE: "tab:red",
@@ -67,8 +68,8 @@ def error_over_time(series: dict, path: Path, scenario_name: str) -> None:
     _save(fig, path)
 
 
-def stanford(series: dict, path: Path, alert_limit_m: float, title: str) -> dict:
-    """Returns the region counts drawn."""
+def stanford(series: dict, path: Path, alert_limit_m: float, title: str, quantity: str = "horizontal") -> dict:
+    """Returns the region counts drawn. `series`: per train {"h": |error|, "hpl": protection level}."""
     h = np.concatenate([s["h"] for s in series.values()]) if series else np.zeros(0)
     pl = np.concatenate([s["hpl"] for s in series.values()]) if series else np.zeros(0)
     ok = np.isfinite(h) & np.isfinite(pl)
@@ -98,8 +99,8 @@ def stanford(series: dict, path: Path, alert_limit_m: float, title: str) -> dict
     ax.set_yscale("log")
     ax.set_xlim(lo, hi)
     ax.set_ylim(lo, hi)
-    ax.set_xlabel("horizontal position error [m]")
-    ax.set_ylabel("horizontal protection level [m]")
+    ax.set_xlabel(f"{quantity} position error [m]")
+    ax.set_ylabel(f"{quantity} protection level [m]")
     ax.set_title(f"{title}: {int(ok.sum())} epochs, alert limit {al:g} m", fontsize=10)
     kw = {"fontsize": 8, "zorder": 4, "ha": "center"}
     ax.text(np.sqrt(lo * al) / 3, np.sqrt(al * lo) * 3, f"normal operation\n{counts['normal']}", **kw)
@@ -181,9 +182,31 @@ def _scalar_mappable(cmap):
     return ScalarMappable(norm=Normalize(0.0, 1.0), cmap=cmap)
 
 
+def along_track_series(log, method: str) -> dict:
+    """Per train: |fused along-track position - truth| and the method's PL, every epoch (NaN/inf: none)."""
+    out = {}
+    for tid, tl in log.trains.items():
+        fused = tl.fused.get(method, [])
+        if len(fused) != len(tl.truth_km):
+            continue
+        x = np.array([f.position_m for f in fused], float)
+        out[tid] = {"h": np.abs(x - np.array(tl.truth_km, float) * 1000.0),
+                    "hpl": np.array([f.pl_m for f in fused], float)}
+    return out
+
+
 def write_all(log, report, out_dir: Path) -> list[str]:
+    from augnet.onboard.along_track_fusion import ALONG_TRACK_ALERT_LIMIT_M, METHODS
+
     out = Path(out_dir)
     error_over_time(log.series, out / ERROR_OVER_TIME_PNG, log.scenario.name)
     stanford(log.series, out / STANFORD_PNG, report.definitions["alert_limit_m"], log.scenario.name)
     network_map(log, report, out / NETWORK_MAP_PNG)
-    return [ERROR_OVER_TIME_PNG, STANFORD_PNG, NETWORK_MAP_PNG]
+    files = [ERROR_OVER_TIME_PNG, STANFORD_PNG, NETWORK_MAP_PNG]
+    if any(tl.fused for tl in log.trains.values()):
+        for method in METHODS:
+            name = STANFORD_ALONG_PNG.format(method=method)
+            stanford(along_track_series(log, method), out / name, ALONG_TRACK_ALERT_LIMIT_M,
+                     f"{log.scenario.name} {method}", quantity="along-track")
+            files.append(name)
+    return files

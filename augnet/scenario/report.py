@@ -19,7 +19,11 @@ report.json (version "augnet-scenario-report/1"); times in seconds since the sce
                                     capture_error_m, events [...], missed_ids, false_ids},
                    protection_level {integrity_risk, k, alert_limit_m, hpl_m, vpl_m, h_error_over_hpl,
                                      v_error_over_vpl, misleading, hazardously_misleading, unavailable},
-                   correction_age_s {n, p50, p95, max, over_limit, limit_s, epochs_without}}},
+                   correction_age_s {n, p50, p95, max, over_limit, limit_s, epochs_without},
+                   along_track_fusion {<method>: {epochs, available, availability, alarms, hmi, rejected_fixes,
+                                       available_from_newest_fix,
+                                       error_available_m, pl_available_m, epochs_without_sky,
+                                       available_without_sky, hmi_without_sky}}}},
     baselines {<name>: {station_a, station_b, length_km, first_fix_s (since the centre's start),
                         fixed_fraction_mean, arcs, arcs_fixed, arc_time_to_fix_s {median, p75}, checked,
                         wrong_fixes, wrong_examples}},
@@ -71,7 +75,7 @@ TRAIN_KEYS = ("epochs", "epochs_without_sky", "status_counts", "corrections_usab
               "acquisitions", "acquisition_time_median_s", "fix_rate_after_first_fix",
               "fix_rate_after_first_fix_incl_no_sky", "horizontal_error_m", "vertical_error_m",
               "along_track_error_m", "cross_track_error_m", "horizontal_error_all_m", "wrong_fixes", "track_id",
-              "virtual_balises", "protection_level", "correction_age_s")
+              "virtual_balises", "protection_level", "correction_age_s", "along_track_fusion")
 BASELINE_KEYS = ("station_a", "station_b", "length_km", "first_fix_s", "fixed_fraction_mean", "arcs", "arcs_fixed",
                  "arc_time_to_fix_s", "checked", "wrong_fixes")
 TARGET_KEYS = ("id", "subject", "description", "target", "measured", "unit", "pass")
@@ -257,10 +261,41 @@ def train_figures(log, tl, alert_limit_m: float) -> tuple[dict, dict]:
                              "misleading": int(mi.sum()), "hazardously_misleading": int(hmi.sum()),
                              "unavailable": int(unavailable.sum())},
         "correction_age_s": age_stats,
+        "along_track_fusion": fusion_figures(tl),
     }
     series = {"t": t, "status": status, "h": h, "v": v, "along": along, "cross": cross, "hpl": hpl, "vpl": vpl,
               "sky": sky, "age": age, "enu": enu, "position": pos}
     return figures, series
+
+
+def fusion_figures(tl) -> dict:
+    """The along-track methods side by side over every epoch of the run (tunnels included), against the truth.
+
+    Per method: available (a position with PL under the alert limit), alarms (the position withdrawn),
+    HMI (|error| > PL while available), errors of the available epochs, and the same over the epochs
+    without sky; rejected fixes and lockouts (the residual check)."""
+    truth = np.array(tl.truth_km, float) * 1000.0
+    no_sky = np.array(tl.n_tracked) == 0
+    out = {}
+    for method, fused in tl.fused.items():
+        if len(fused) != len(truth):
+            continue
+        x = np.array([f.position_m for f in fused], float)
+        pl = np.array([f.pl_m for f in fused], float)
+        avail = np.array([f.available for f in fused], bool)
+        err = np.abs(x - truth)
+        hmi = avail & (err > pl)
+        n = len(fused)
+        out[method] = {
+            "epochs": n, "available": int(avail.sum()), "availability": float(avail.mean()) if n else None,
+            "alarms": int(sum(f.alarm for f in fused)), "hmi": int(hmi.sum()),
+            "rejected_fixes": int(sum(f.rejected for f in fused)),
+            "available_from_newest_fix": int(sum(f.available and f.from_fix for f in fused)),
+            "error_available_m": M.pct(err[avail], (50, 95)), "pl_available_m": M.pct(pl[avail], (50, 95)),
+            "epochs_without_sky": int(no_sky.sum()), "available_without_sky": int((avail & no_sky).sum()),
+            "hmi_without_sky": int((hmi & no_sky).sum()),
+        }
+    return out
 
 
 def balise_figures(log, tl, t: np.ndarray, sky: np.ndarray) -> dict:

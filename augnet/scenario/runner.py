@@ -46,12 +46,14 @@ from augnet.centre.vrs import synthesize
 from augnet.gnss import time as gtime
 from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
 from augnet.gnss.ephemeris import NavigationData
+from augnet.onboard.along_track_fusion import METHODS, AlongTrackFix, AlongTrackFusion, FusedPosition, FusionSettings
 from augnet.onboard.balise import BaliseEvent, ListSink
 from augnet.onboard.corrections import CorrectionDecoder
 from augnet.onboard.ntrip_client import DEFAULT_GGA_INTERVAL_S
 from augnet.onboard.observations import EpochObs
+from augnet.onboard.odometer import OdometerModel
 from augnet.onboard.rtk import RtkOptions, Status
-from augnet.onboard.trackmap import DEFAULT_INTEGRITY_RISK, TrackDatabase
+from augnet.onboard.trackmap import DEFAULT_INTEGRITY_RISK, TrackDatabase, gaussian_k
 from augnet.onboard.unit import OnboardUnit
 from augnet.scenario.latency import LatencyModel
 from augnet.scenario.observations import RoverObservations, StationObservations
@@ -59,6 +61,7 @@ from augnet.scenario.truth import TruthIndex
 from ntrip_caster.gga import parse_gga
 from ntrip_caster.reposition import RepositionPolicy
 from stations import constellation as const
+from stations.odometer import OdometerStreams, simulate_odometers
 from stations.rtcm_stream import RtcmStreams
 from stations.scenario import Scenario, ScenarioError, load_scenario
 from stations.trackmap_export import track_database
@@ -209,6 +212,8 @@ class TrainLog:
     truth_position: list[np.ndarray] = field(default_factory=list)  # truth, ECEF
     truth_km: list[float] = field(default_factory=list)  # truth chainage of the antenna
     events: list[BaliseEvent] = field(default_factory=list)
+    # along-track fusion of the GNSS fixes with the odometer, per method (augnet.onboard.along_track_fusion)
+    fused: dict[str, list[FusedPosition]] = field(default_factory=dict)
     session_opened_s: float = math.nan
     vrs_moves: int = 0
     gga_sent: int = 0
@@ -263,6 +268,7 @@ class _Train:
     decoder: CorrectionDecoder
     inbox: collections.deque  # (arrival time, bytes), in arrival order (one TCP stream)
     policy: RepositionPolicy
+    fusions: dict[str, AlongTrackFusion] = field(default_factory=dict)
     base: EpochObs | None = None
     base_station_id: int | None = None
     last_gga_t: float = -math.inf
@@ -295,6 +301,14 @@ class Chain:
         self.engine = CentreEngine(self.stations, world.t0, network_name=sc.name)
         self.track_db = TrackDatabase.from_dict(track_database(sc)) if sc.line is not None else None
         self.trains: dict[str, _Train] = {}
+        # the simulated odometers (world clock, so an odometer_slide keeps its scenario time); truth kept inside
+        trains_rx = [r for r in rx if r.kind == "train"]
+        self.odometers: OdometerStreams | None = None
+        if trains_rx:
+            self.odometers = simulate_odometers(world.scenario, world.t_tags - world.t0,
+                                                np.array([r.km for r in trains_rx]),
+                                                np.array([r.speed_m_s for r in trains_rx]))
+        train_cfg = {t.id: t for t in sc.trains}
         for i, r in enumerate(rx):
             if r.kind != "train":
                 continue
@@ -304,7 +318,14 @@ class Chain:
             unit.rtk.base_is_vrs = True
             log = TrainLog(r.id, r.track_id)
             log.events = unit.sink.events
-            self.trains[r.id] = _Train(log, i, unit, CorrectionDecoder(), collections.deque(), RepositionPolicy())
+            cfg = train_cfg[r.id]
+            # the onboard knows its tachometer and its orientation on the journey, not the wheel's true radius
+            odo_model = OdometerModel(pulses_per_rev=cfg.odometer_pulses_per_rev, sample_interval_s=sc.interval_s)
+            settings = FusionSettings(direction=cfg.direction, integrity_risk=unit.integrity_risk)
+            fusions = {m: AlongTrackFusion(m, odo_model, settings) for m in METHODS}
+            log.fused = {m: [] for m in METHODS}
+            self.trains[r.id] = _Train(log, i, unit, CorrectionDecoder(), collections.deque(), RepositionPolicy(),
+                                       fusions)
         self.baselines = {s.name: BaselineLog(s.name, s.name_a, s.name_b, s.length_m)
                           for s in self.engine.network.solvers.values()}
         self.interpolation: dict[str, list[float]] = {p: [] for p in [*self.trains, *self.check_points]}
@@ -506,6 +527,7 @@ class Chain:
         log.message.append(sol.message)
         log.truth_position.append(blk.rx_ecef[e, tr.row].copy())
         log.truth_km.append(float(self.world.receivers[tr.row].km[int(blk.epoch_index[e])]))
+        self._fuse(tr, t, int(blk.epoch_index[e]), sol, m)
         # GGA upstream: open the VRS session, and let the caster's policy move it
         if sol.status == Status.NONE or t - tr.last_gga_t < GGA_INTERVAL_S:
             return
@@ -522,6 +544,16 @@ class Chain:
         elif tr.policy.due(t, fix):
             self.engine.move_session(log.id, fix.lat_deg, fix.lon_deg, fix.height_m)
             tr.policy.applied(t, fix)
+
+    def _fuse(self, tr: _Train, t: float, epoch: int, sol, m) -> None:
+        """Every method's along-track position at t from this epoch's map-matched fix and odometer reading."""
+        fix = None
+        if (m is not None and sol.status != Status.NONE and np.all(np.isfinite(sol.position_m))
+                and math.isfinite(m.along_pl_m) and m.along_pl_m > 0):
+            fix = AlongTrackFix(t, m.km * 1000.0, m.along_pl_m / gaussian_k(tr.unit.integrity_risk))
+        odo = self.odometers.sample(tr.log.id, epoch, t)
+        for method, fusion in tr.fusions.items():
+            tr.log.fused[method].append(fusion.step(t, odo, fix))
 
     # --- the record ---------------------------------------------------------------------------------
 

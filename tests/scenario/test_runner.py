@@ -70,7 +70,8 @@ def test_plots_are_png_images_with_content(demo):
     from matplotlib.image import imread
 
     _, out, d = demo
-    for name in ("error_over_time.png", "stanford.png", "network_map.png"):
+    along = [f"stanford_along_{m}.png" for m in ("gnss_raim", "median", "weighted_median", "residual_weighted_median")]
+    for name in ("error_over_time.png", "stanford.png", "network_map.png", *along):
         assert name in d["files"]
         w, h = _png_size(out / name)
         assert w >= 600 and h >= 500, (name, w, h)
