@@ -12,9 +12,10 @@ SUDO   := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 DEBS   := rtklib curl chromium chromium-driver
 DEB_CHECK := command -v rnx2rtkp >/dev/null && command -v convbin >/dev/null && command -v str2str >/dev/null && command -v rtkrcv >/dev/null && command -v curl >/dev/null && command -v chromium >/dev/null && command -v chromedriver >/dev/null
 
-# One pytest worker per core, a whole test file to a worker (module fixtures are built once); WORKERS=0: serial.
+# One pytest worker per core, a whole test file to a worker (module fixtures are built once), files handed out in
+# tests/conftest.py's order (longest first; xdist would reorder them by test count); WORKERS=0: serial.
 WORKERS  ?= 2
-PARALLEL := $(if $(filter 0,$(WORKERS)),,-n $(WORKERS) --dist loadfile)
+PARALLEL := $(if $(filter 0,$(WORKERS)),,-n $(WORKERS) --dist loadfile --no-loadscope-reorder)
 
 .PHONY: run test test-fast bench debs venv clean
 

@@ -152,7 +152,7 @@ PAGES = (
     ("centre", "augnet.centre.baseline_config", "BaselineConfig",
      "Network engine settings (`augnet vrs --opt NAME=VALUE`)"),
     ("vrs", "augnet.centre.vrs_admission", "AdmissionConfig",
-     "VRS satellite admission (`augnet vrs --admission on|off`, `--admission-NAME VALUE`)"),
+     "VRS satellite admission (`augnet vrs` and `augnet up`: `--admission on|off`, `--admission-NAME VALUE`)"),
 )
 
 

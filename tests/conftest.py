@@ -35,6 +35,18 @@ def require_tool(name: str) -> str:
 
 
 def pytest_collection_modifyitems(config, items):
-    """The whole-system runs first: they are the longest in wall-clock time but mostly wait on the real clock,
-    so under `make test`'s two workers (one file per worker) they overlap the CPU-bound simulations."""
-    items.sort(key=lambda item: item.get_closest_marker("system") is None)
+    """Longest files first, so that under `make test`'s two workers (one file per worker, handed out in this
+    order: the Makefile turns off xdist's reordering by test count, which put the one-test hour-long files last)
+    the short files fill in at the end instead of one worker finishing a long file alone: the whole-system runs
+    first (the longest in wall-clock time but mostly waiting on the real clock, they overlap the CPU-bound
+    simulations), then the files of the long simulations (their LONG_RUN_TIMEOUT_S), every other file with a
+    `slow` test, then the rest, each group in collection order."""
+    rank: dict[str, int] = {}
+    for item in items:
+        key = item.nodeid.split("::", 1)[0]
+        timeout = item.get_closest_marker("timeout")
+        long_run = timeout is not None and bool(timeout.args) and timeout.args[0] >= LONG_RUN_TIMEOUT_S
+        r = (0 if item.get_closest_marker("system") else 1 if long_run else
+             2 if item.get_closest_marker("slow") else 3)
+        rank[key] = min(rank.get(key, 3), r)
+    items.sort(key=lambda item: rank[item.nodeid.split("::", 1)[0]])

@@ -54,7 +54,7 @@ def vrs(
     """Write a virtual reference station RINEX file for a point from a network's observation files."""
     from augnet.centre.baseline_config import BaselineConfig
     from augnet.centre.postprocess import PostprocessError, run_vrs
-    from augnet.centre.vrs_admission import AdmissionConfig, check_config
+    from augnet.centre.vrs_admission import config_from_flags
     from augnet.options import OptionError, with_assignments
 
     try:
@@ -62,19 +62,14 @@ def vrs(
     except OptionError as exc:
         typer.echo(f"error: --opt {exc}", err=True)
         raise typer.Exit(2)
-    flags = {"admission": admission, "interval_s": admission_interval_s, "settle_s": admission_settle_s,
-             "min_satellites": admission_min_satellites, "max_wait_s": admission_max_wait_s}
-    admission_config = AdmissionConfig()
-    for field_name, value in flags.items():
-        if value is None:
-            continue
-        flag = "--admission" + ("" if field_name == "admission" else "-" + field_name.replace("_", "-"))
-        try:
-            admission_config = with_assignments(admission_config, [f"{field_name}={value}"])
-            check_config(admission_config)
-        except OptionError as exc:
-            typer.echo(f"error: {flag} {value}: {exc}", err=True)
-            raise typer.Exit(2)
+    try:
+        admission_config = config_from_flags({"admission": admission, "interval_s": admission_interval_s,
+                                              "settle_s": admission_settle_s,
+                                              "min_satellites": admission_min_satellites,
+                                              "max_wait_s": admission_max_wait_s})
+    except OptionError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2)
 
     step = {"next": 0.0}
 

@@ -10,6 +10,15 @@ Antennas: with an ANTEX file (`antex=`), each station's antenna is modelled from
 descriptor gives (or `antenna_types`, which take precedence: a station that sends no 1033), so the network's
 residuals refer to the antenna reference points and the VRS is for a null antenna, as its 1033
 (`ADVNULLANTENNA`, vrs_stream.py) says. Without one nothing is modelled.
+
+Admission (`admission=`, vrs_admission.py, the policy and settings of `augnet vrs`): each session's network
+VRS takes satellites the network newly corrects only at its admission moments; until then they are left out of
+it (as `augnet vrs` leaves them out of a network epoch), and at a moment every satellite it carries is flagged
+loss-of-lock, so the stream restarts their locks (MSM lock-time indicator 0). Each session has its own
+admission state. While the policy finds too few corrected satellites for a network VRS (the network's start),
+the session gets what the synthesis gives, its fallback (`augnet vrs` writes the nearest station shifted). `AdmissionConfig(admission=False)`: the VRS as synthesised, byte for byte what the stream
+sent before admission existed. Satellites a point within vrs.UNCORRECTED_MAX_DISTANCE_M of its master gets
+without corrections are not the policy's: they stay as synthesised.
 """
 
 from __future__ import annotations
@@ -28,6 +37,7 @@ from augnet.centre.ingest import EpochAligner, StationDecoder
 from augnet.centre.network import NetworkEpoch, NetworkSolver
 from augnet.centre.service_area import AreaAlarm, AreaAnswer, AreaConfig, ServiceArea, refusal_message
 from augnet.centre.vrs import VrsEpoch, VrsPlan, synthesize
+from augnet.centre.vrs_admission import AdmissionBatch, AdmissionConfig, fixed_somewhere
 from augnet.centre.vrs_stream import VrsStreamEncoder
 from augnet.gnss.antex import AntexFile, read_antex
 from augnet.gnss.ephemeris import Ephemeris, NavigationData
@@ -41,6 +51,7 @@ MAX_STATION_ID = 4095
 SUBJECT_CORRECTIONS = "augnet.corrections.{network}"
 SUBJECT_ALARMS = "augnet.alarms.{network}"
 MAX_CORRECTION_LAG_S = 5.0  # older network corrections are not applied to a new epoch's VRS (network-rtk.md)
+LLI_LOSS_OF_LOCK = 1  # RINEX LLI bit 0, what the stream encoder restarts a lock on
 
 
 @dataclass
@@ -84,7 +95,8 @@ class CentreEngine:
                  master: str | None = None, config: BaselineConfig | None = None,
                  ephemerides: list[Ephemeris] | None = None, msm_level: int = 7,
                  vrs_before_network: bool = True, antex: AntexFile | str | None = None,
-                 antenna_types: dict[str, str] | None = None, area: AreaConfig | None = None):
+                 antenna_types: dict[str, str] | None = None, area: AreaConfig | None = None,
+                 admission: AdmissionConfig | None = None):
         self.network_name = network_name
         self.antex = read_antex(antex) if isinstance(antex, (str, bytes)) or hasattr(antex, "__fspath__") else antex
         self.antenna_types: dict[str, str] = {}  # station -> antenna type in use (1033 or configured)
@@ -101,6 +113,7 @@ class CentreEngine:
         if ephemerides:
             self._add_ephemerides(ephemerides)
         self.encoder = VrsStreamEncoder(msm_level)
+        self.admission = AdmissionBatch(admission)  # per session: when newly corrected satellites enter its VRS
         self.sessions: dict[str, Session] = {}
         self._station_ids = itertools.count(FIRST_VRS_STATION_ID)
         self.outbox: list[tuple[str, bytes]] = []  # (bus subject, payload) for the service to publish
@@ -222,6 +235,7 @@ class CentreEngine:
     def close_session(self, client_id: str) -> None:
         self.sessions.pop(client_id, None)
         self.encoder.remove(client_id)
+        self.admission.remove(client_id)
 
     # --- processing -----------------------------------------------------------------------------
 
@@ -275,6 +289,8 @@ class CentreEngine:
             vrs = synthesize(ne, {k: v for k, v in eps.items() if v is not None}, points, self.nav,
                              plan=self._plan, keys=ids)
             self._plan = None
+            if vrs is not None and self.admission.config.admission:
+                self._admit(ids, ne, vrs)
             t1 = time.perf_counter()
             if vrs is not None:
                 group = self.serve_group or len(ids)
@@ -300,6 +316,25 @@ class CentreEngine:
         if self.after_serve is not None:
             self.after_serve(True)
         return vrs
+
+    def _admit(self, ids: list[str], ne: NetworkEpoch, vrs: VrsEpoch) -> None:
+        """Each session's admission decision on its VRS epoch, in place: in a network VRS the corrected satellites
+        it does not carry (yet) are left out, and at its moments every satellite it carries is flagged
+        loss-of-lock."""
+        corrected = vrs.corrected & np.isin(vrs.sats.astype(str), list(fixed_somewhere(ne)))[None, :]
+        carried, moment = self.admission.step(vrs.t_gpst, ids, vrs.sats, corrected, vrs.master)
+        # not a network VRS (too few corrected): the session gets its fallback as synthesised, as `augnet vrs`
+        # writes its single-base epoch then
+        out = vrs.corrected & ~carried & carried.any(axis=1)[:, None]
+        if out.any():
+            vrs.code_m[out] = np.nan
+            vrs.phase_cyc[out] = np.nan
+            vrs.cnr_dbhz[out] = np.nan
+            vrs.lli[out] = 0
+            vrs.corrected[out] = False
+            vrs.model[out] = -1
+        if moment.any():
+            vrs.lli |= ((moment[:, None] & carried)[..., None] * LLI_LOSS_OF_LOCK).astype(vrs.lli.dtype)
 
     def prepare_next(self) -> None:
         """Build the next epoch's VRS plan now (the sessions' masters, interpolated corrections and

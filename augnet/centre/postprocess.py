@@ -65,7 +65,7 @@ from augnet.centre.network import NetworkSolver
 from augnet.centre.observations import StationEpoch, from_obsdata
 from augnet.centre.station_check import CheckResult, StationCheck
 from augnet.centre.vrs import geometry_many, synthesize
-from augnet.centre.vrs_admission import AdmissionConfig, AdmissionPolicy
+from augnet.centre.vrs_admission import AdmissionConfig, AdmissionPolicy, fixed_somewhere
 from augnet.gnss.antex import NULL_ANTENNA, AntexError, ReceiverAntenna, antennas_for, read_antex
 from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
 from augnet.gnss.ephemeris import NavigationData
@@ -557,13 +557,8 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
             continue
         if vrs is not None:
             vmaster = vrs.master[0]
-            # A satellite counts as corrected only if some station besides the network master has a residual
-            # for it: interpolation.interpolate() returns the master's zero when only the master "has" a
-            # satellite, and synthesize() then flags it corrected though no baseline fixed it (seen with
-            # --master = the point's nearest station: all satellites "corrected" from the first epoch).
-            fixed_somewhere = set(map(str, ne.sats[np.isfinite(ne.dd_iono_m[1:]).any(axis=0)])) \
-                if len(ne.stations) > 1 else set()
-            corrected = set(map(str, vrs.sats[vrs.corrected[0]])) & fixed_somewhere
+            # a satellite counts as corrected only where a baseline fixed it (vrs_admission.fixed_somewhere)
+            corrected = set(map(str, vrs.sats[vrs.corrected[0]])) & fixed_somewhere(ne)
         else:
             vmaster = min(have, key=lambda n: float(np.linalg.norm(stations[n] - point[0])))
             corrected = set()

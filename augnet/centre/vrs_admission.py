@@ -19,14 +19,18 @@ An admission moment is held when satellites wait and
 where ready is: the corrected set has not changed for `settle_s` (the network has fixed what it was about to
 fix), or `min_satellites` wait (entering: are corrected), or a satellite has waited `max_wait_s`.
 
-`AdmissionPolicy.step(t, corrected)` is a pure state machine over time tags (no clock), one per VRS.
-Decision 0160 has the measurements.
+`AdmissionPolicy.step(t, corrected)` is a pure state machine over time tags (no clock), one per VRS: what
+`augnet vrs` runs. `AdmissionBatch` makes the same decisions for many VRS at once (sessions x satellites as
+arrays): what the live stream (`engine.CentreEngine`, `augnet up`) runs for its trains, each session with its own
+state. Decision 0160 has the measurements, 0190 the live stream.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import Callable, Iterable
+
+import numpy as np
 
 from augnet.options import OptionError, setting
 
@@ -58,6 +62,27 @@ def check_config(cfg: AdmissionConfig) -> None:
             raise OptionError(f"{name}: {getattr(cfg, name)!r} is negative (seconds, >= 0)")
     if cfg.min_satellites < 1:
         raise OptionError(f"min_satellites: {cfg.min_satellites!r} is not a count of satellites (>= 1)")
+
+
+def flag(name: str) -> str:
+    """The command-line flag of a setting: `--admission`, `--admission-interval-s`, ... (`augnet vrs`, `augnet up`)."""
+    return "--admission" + ("" if name == "admission" else "-" + name.replace("_", "-"))
+
+
+def config_from_flags(values: dict) -> AdmissionConfig:
+    """The settings from flag values {setting: text, None for its default}; OptionError names the flag and value."""
+    from augnet.options import with_assignments
+
+    cfg = AdmissionConfig()
+    for name, value in values.items():
+        if value is None:
+            continue
+        try:
+            cfg = with_assignments(cfg, [f"{name}={value}"])
+            check_config(cfg)
+        except OptionError as exc:
+            raise OptionError(f"{flag(name)} {value}: {exc}") from None
+    return cfg
 
 
 @dataclass(frozen=True)
@@ -118,3 +143,143 @@ class AdmissionPolicy:
                 return Admission(eligible, True, frozenset())
         self.carried = kept
         return Admission(kept, False, waiting)
+
+
+def fixed_somewhere(ne) -> set[str]:
+    """Satellites of a network epoch with a DD residual at some station besides the network master (row 0).
+    Only these count as corrected: interpolation.interpolate() returns the master's zero when only the master
+    "has" a satellite, and synthesize() then flags it corrected though no baseline fixed it (seen with
+    `--master` = the point's nearest station: all satellites "corrected" from the first epoch)."""
+    if len(ne.stations) < 2 or not len(ne.sats):
+        return set()
+    return set(map(str, ne.sats[np.isfinite(ne.dd_iono_m[1:]).any(axis=0)]))
+
+
+def _capacity(have: int, need: int, least: int) -> int:
+    """An array axis's new length: unchanged while it holds `need`, else doubled (amortised growth)."""
+    return have if need <= have else max(need, 2 * have, least)
+
+
+class AdmissionBatch:
+    """`AdmissionPolicy` for many VRS at once, keyed by session: the same decisions (tests compare them), each
+    session with its own state, computed as arrays over sessions x satellites. The rule of a network epoch is
+    postprocess.network_satellites's, counted per system over the arrays."""
+
+    def __init__(self, config: AdmissionConfig | None = None):
+        from augnet.centre.postprocess import MIN_NETWORK_DD, MIN_SYSTEM_SATELLITES
+
+        self.config = config or AdmissionConfig()
+        check_config(self.config)
+        self._min_system, self._min_dd = MIN_SYSTEM_SATELLITES, MIN_NETWORK_DD
+        self._rows: dict = {}  # session key -> row
+        self._free_rows: list[int] = []
+        self._cols: dict[str, int] = {}  # satellite -> column
+        self._systems: dict[str, int] = {}  # system letter -> index
+        self._col_system = np.zeros(0, int)
+        self._masters: dict = {}  # session key -> master station of its last step
+        self._alloc(0, 0)
+
+    def _alloc(self, rows: int, cols: int) -> None:
+        self.carried = np.zeros((rows, cols), bool)
+        self._corrected = np.zeros((rows, cols), bool)
+        self._waiting_since = np.full((rows, cols), np.nan)
+        self._changed_t = np.full(rows, np.nan)  # NaN: never stepped
+        self._last_moment_t = np.full(rows, np.nan)  # NaN: no moment yet
+        self._free = np.zeros(rows, bool)
+
+    def _grow(self, rows: int, cols: int) -> None:
+        r0, k0 = self.carried.shape
+        if rows <= r0 and cols <= k0:
+            return
+        old = (self.carried, self._corrected, self._waiting_since, self._changed_t, self._last_moment_t, self._free)
+        self._alloc(_capacity(r0, rows, 16), _capacity(k0, cols, 64))
+        for new, a in zip((self.carried, self._corrected, self._waiting_since, self._changed_t,
+                           self._last_moment_t, self._free), old):
+            new[tuple(slice(0, n) for n in a.shape)] = a
+
+    def _row(self, key) -> int:
+        r = self._rows.get(key)
+        if r is None:
+            r = self._free_rows.pop() if self._free_rows else len(self._rows)
+            self._rows[key] = r
+            self._grow(r + 1, len(self._cols))
+            self.carried[r] = self._corrected[r] = False
+            self._waiting_since[r] = self._changed_t[r] = self._last_moment_t[r] = np.nan
+            # a session's first epoch is a moment: its rover has no lock to lose yet (a train joining a network
+            # in service takes every corrected satellite at once instead of an empty VRS for `settle_s`)
+            self._free[r] = True
+        return r
+
+    def _col(self, sat: str) -> int:
+        k = self._cols.get(sat)
+        if k is None:
+            k = self._cols[sat] = len(self._cols)
+            system = self._systems.setdefault(sat[0], len(self._systems))
+            self._col_system = np.append(self._col_system, system)
+        return k
+
+    def remove(self, key) -> None:
+        """A session closed: its row is free for the next one (which starts afresh)."""
+        r = self._rows.pop(key, None)
+        self._masters.pop(key, None)
+        if r is not None:
+            self._free_rows.append(r)
+
+    def restart(self, keys) -> None:
+        """As AdmissionPolicy.restart, for these sessions."""
+        self._free[[self._row(k) for k in keys]] = True
+
+    def _rule(self, corrected: np.ndarray) -> np.ndarray:
+        """network_satellites over rows: each system with enough satellites, when they give enough DDs."""
+        onehot = self._col_system[:corrected.shape[1], None] == np.arange(max(len(self._systems), 1))[None, :]
+        counts = corrected.astype(np.int64) @ onehot  # (rows, systems)
+        systems = counts >= self._min_system
+        enough = ((counts - 1) * systems).sum(axis=1) >= self._min_dd
+        return corrected & systems[:, self._col_system[:corrected.shape[1]]] & enough[:, None]
+
+    def step(self, t: float, keys: list, sats, corrected: np.ndarray, masters: list | None = None):
+        """One epoch at `t` [s] for the sessions `keys`: `corrected` (sessions x `sats`) their network-corrected
+        satellites; `masters` (one per session) their master stations (a change is a moment for the waiting).
+        Returns (carried (sessions x sats) bool, moment (sessions,) bool)."""
+        cfg = self.config
+        sat_cols = np.array([self._col(str(s)) for s in sats], dtype=int)
+        if masters is not None:
+            changed_master = [k for k, m in zip(keys, masters) if self._masters.get(k, m) != m]
+            if changed_master:
+                self.restart(changed_master)
+            self._masters.update(zip(keys, masters))
+        rows = np.array([self._row(k) for k in keys], dtype=int)
+        self._grow(len(self._rows), len(self._cols))
+        K = len(self._cols)
+        corr = np.zeros((len(rows), K), bool)
+        corr[:, sat_cols] = np.asarray(corrected, bool)
+        changed = np.isnan(self._changed_t[rows]) | (corr != self._corrected[rows, :K]).any(axis=1)
+        changed_t = np.where(changed, t, self._changed_t[rows])
+        self._changed_t[rows] = changed_t
+        self._corrected[rows, :K] = corr
+        eligible = self._rule(corr)
+        free = self._free[rows]
+        self._free[rows] = False
+        if not cfg.admission:
+            self.carried[rows, :K] = eligible
+            return eligible[:, sat_cols], np.zeros(len(rows), bool)
+        before = self.carried[rows, :K]
+        kept = self._rule(before & eligible)  # the network's losses leave at once
+        waiting = eligible & ~kept
+        since = self._waiting_since[rows, :K]
+        since = np.where(waiting, np.where(np.isnan(since), t, since), np.nan)
+        entering = ~kept.any(axis=1)  # without the waiting satellites this is no network epoch
+        falling = entering & before.any(axis=1)  # ... and it was one: the rover restarts anyway
+        last = self._last_moment_t[rows]
+        with np.errstate(invalid="ignore"):
+            due = entering | np.isnan(last) | (t - last >= cfg.interval_s)
+        oldest = np.where(waiting, since, np.inf).min(axis=1, initial=np.inf)
+        ready = ((t - changed_t >= cfg.settle_s)
+                 | (np.where(entering, eligible.sum(axis=1), waiting.sum(axis=1)) >= cfg.min_satellites)
+                 | (t - oldest >= cfg.max_wait_s))
+        moment = waiting.any(axis=1) & (free | falling | (due & ready))
+        carried = np.where(moment[:, None], eligible, kept)
+        self.carried[rows, :K] = carried
+        self._last_moment_t[rows] = np.where(moment, t, last)
+        self._waiting_since[rows, :K] = np.where(moment[:, None], np.nan, since)
+        return carried[:, sat_cols], moment

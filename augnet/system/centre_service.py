@@ -46,6 +46,7 @@ import numpy as np
 
 from augnet.blas_threads import limit_blas_threads
 from augnet.centre.service_area import AreaAlarm, AreaConfig, ServiceArea, refusal_message
+from augnet.centre.vrs_admission import AdmissionConfig
 from augnet.gnss import time as gtime
 from augnet.system.centre_protocol import (
     FROM_CENTRE, FROM_LOOP, Alive, CentreError, CloseSession, Decoder, EpochsSolved, Message, MoveSession,
@@ -101,6 +102,7 @@ class CentreSpec:
     t_ref_gpst: float
     network_name: str = "line"
     area: AreaConfig | None = None  # the service area (default: from the stations, service_area.py)
+    admission: AdmissionConfig | None = None  # when satellites enter each VRS (default: on, vrs_admission.py)
 
 
 class _Handle:
@@ -539,7 +541,8 @@ class _CentreWorker:
         self.sock = sock
         sock.setblocking(True)
         stations = {k: np.asarray(v, float) for k, v in spec.stations.items()}
-        self.engine = CentreEngine(stations, spec.t_ref_gpst, network_name=spec.network_name, area=spec.area)
+        self.engine = CentreEngine(stations, spec.t_ref_gpst, network_name=spec.network_name, area=spec.area,
+                                   admission=spec.admission)
         self.engine.after_serve = self._flush_vrs  # VRS leave as soon as they exist, before the network solve
         self.engine.serve_group = VRS_GROUP
         gc.freeze()  # the engine's long-lived start-up objects: not scanned by every full collection

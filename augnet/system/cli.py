@@ -36,12 +36,36 @@ def up(
         None, help="VRS served up to this far from the nearest station (default: the largest station spacing)."),
     outside_area: str = typer.Option("refuse", help="A client outside the service area: refuse, or nearest "
                                                     "(the nearest station's stream)."),
+    admission: str = typer.Option("on", "--admission", metavar="on|off",
+                                  help="on: satellites the network newly corrects enter each train's VRS together at "
+                                  "rare admission moments, every satellite restarted there (for rovers without "
+                                  "partial AR); off: each enters once corrected (docs/options/vrs.md)."),
+    admission_interval_s: Optional[str] = typer.Option(None, "--admission-interval-s", metavar="S",
+                                                       help="Least time between admission moments, seconds."),
+    admission_settle_s: Optional[str] = typer.Option(None, "--admission-settle-s", metavar="S",
+                                                     help="A moment once the corrected set is this long unchanged."),
+    admission_min_satellites: Optional[str] = typer.Option(None, "--admission-min-satellites", metavar="N",
+                                                           help="... or once this many satellites wait."),
+    admission_max_wait_s: Optional[str] = typer.Option(None, "--admission-max-wait-s", metavar="S",
+                                                       help="... or once a satellite has waited this long."),
 ) -> None:
     """Stations, caster, centre, RSSP-I link, trains and console in one asyncio process."""
+    from augnet.centre.vrs_admission import config_from_flags
+    from augnet.options import OptionError
+
+    try:
+        admission_config = config_from_flags({"admission": admission, "interval_s": admission_interval_s,
+                                              "settle_s": admission_settle_s,
+                                              "min_satellites": admission_min_satellites,
+                                              "max_wait_s": admission_max_wait_s})
+    except OptionError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2)
     settings = SystemSettings(scenario=scenario, trains=trains, duration_s=duration, db_url=db, host=host,
                               caster_port=caster_port, console_port=console_port, bus_url=bus, rbc=rbc,
                               view=view, report_path=report, state_path=state, admin_password=admin_password,
-                              service_radius_km=service_radius_km, outside_area=outside_area)
+                              service_radius_km=service_radius_km, outside_area=outside_area,
+                              admission=admission_config)
     try:
         settings.validate()
         from stations.scenario import load_scenario

@@ -156,7 +156,7 @@ class System:
     def _make_centre(self, sc: Scenario, stations, enabled: dict[str, bool]) -> None:
         """The centre service, with the stations an operator disabled left out (its process starts later)."""
         xyz = {rx.id: tuple(float(x) for x in rx.ecef[0]) for rx in stations}
-        spec = CentreSpec(xyz, self.world.t0, sc.name, area=self.settings.area())
+        spec = CentreSpec(xyz, self.world.t0, sc.name, area=self.settings.area(), admission=self.settings.admission)
         self.centre = CentreService(spec, asyncio.get_running_loop(), on_epoch=self._on_epoch,
                                     on_outbox=self._on_outbox, on_alarm=self._alarm,
                                     on_written=self._on_vrs_written)

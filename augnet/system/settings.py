@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+
+from augnet.centre.vrs_admission import AdmissionConfig, check_config
+from augnet.options import OptionError
 
 DEFAULT_DB_URL = "sqlite:///augnet.db"
 DEFAULT_CASTER_PORT = 2101  # IANA-registered NTRIP port
@@ -42,6 +45,8 @@ class SystemSettings:
     # the network's largest station spacing) and what a client outside gets ("refuse" or "nearest")
     service_radius_km: float | None = None
     outside_area: str = "refuse"
+    # when satellites the network newly corrects enter each train's VRS (docs/options/vrs.md; `--admission ...`)
+    admission: AdmissionConfig = field(default_factory=AdmissionConfig)
 
     def validate(self) -> "SystemSettings":
         if self.trains is not None and not 0 <= self.trains <= MAX_LIVE_TRAINS:
@@ -63,6 +68,10 @@ class SystemSettings:
             raise SettingsError("service-radius-km", "must be > 0 and at most 20,000 km (half the Earth)")
         if self.outside_area not in ("refuse", "nearest"):
             raise SettingsError("outside-area", f"{self.outside_area!r}: expected refuse or nearest")
+        try:
+            check_config(self.admission)
+        except OptionError as exc:
+            raise SettingsError("admission", str(exc)) from None
         return self
 
     def area(self):

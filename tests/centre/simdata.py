@@ -6,19 +6,12 @@ from __future__ import annotations
 import numpy as np
 
 from augnet.centre.observations import StationEpoch
+from stations.network_truth import station_epoch, true_dd_integers
 
 
 def station_epochs(world, block, r: int) -> list[StationEpoch]:
     """Receiver r's epochs of a simulator block, first two signals per system."""
-    sats = np.array(world.sats)
-    out = []
-    for e in range(len(block.t_gpst)):
-        obs = block.observed[e, r].any(axis=1)
-        out.append(StationEpoch(world.receivers[r].id, float(block.t_gpst[e]), sats[obs],
-                                block.pseudorange_m[e, r][obs][:, :2], block.phase_cyc[e, r][obs][:, :2],
-                                block.lli[e, r][obs][:, :2], block.cnr_dbhz[e, r][obs][:, :2],
-                                world.freq_hz[obs][:, :2], world.codes[obs][:, :2]))
-    return out
+    return [station_epoch(world, block, e, r) for e in range(len(block.t_gpst))]
 
 
 def recorded_streams(duration_s: float, scenario: str = "network-70km"):
@@ -39,7 +32,4 @@ def recorded_streams(duration_s: float, scenario: str = "network-70km"):
 
 def truth_dd_ambiguity(world, block, e: int, ra: int, rb: int, sat: str, ref: str) -> np.ndarray:
     """Truth DD integer ambiguities (b - a, sat - ref) on the first two signals."""
-    idx = {s: j for j, s in enumerate(world.sats)}
-    amb = block.ambiguity_cyc[e]
-    j, jr = idx[sat], idx[ref]
-    return (amb[rb, j, :2] - amb[ra, j, :2]) - (amb[rb, jr, :2] - amb[ra, jr, :2])
+    return true_dd_integers(world, block, e, ra, rb, [sat], {sat[0]: ref})[0]

@@ -22,9 +22,10 @@ import pytest
 
 from augnet.centre.network import NetworkSolver
 from augnet.gnss.ionosphere import IONO_K_M3_S2
+from stations.network_truth import true_dd_integers
 from stations.scenario import load_scenario
 from stations.world import World
-from tests.centre.simdata import station_epochs, truth_dd_ambiguity
+from tests.centre.simdata import station_epochs
 from tests.conftest import LONG_RUN_TIMEOUT_S
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(LONG_RUN_TIMEOUT_S)]
@@ -133,20 +134,13 @@ def hour():
                         fractions.setdefault(solver.name, []).append(res.fixed_fraction)
                         if epoch % MODEL_CHECK_EVERY_S == 0 and net.iono_model is not None:
                             model += _model_against_truth(net.iono_model, solver, res, blk.stec_tecu[e], ids, col)
-                    # every fixed DD against the truth (vectorised truth_dd_ambiguity)
-                    ra, rb = ids.index(solver.name_a), ids.index(solver.name_b)
+                    # every fixed DD against the truth
                     k = np.flatnonzero(res.fixed & ~res.is_reference())
                     if not k.size:
                         continue
-                    j = np.array([col[str(s)] for s in res.sats[k]])
-                    jr = np.array([col[res.refs[str(s)[0]]] for s in res.sats[k]])
-                    amb = blk.ambiguity_cyc[e][:, :, :2]
-                    truth = (amb[rb, j] - amb[ra, j]) - (amb[rb, jr] - amb[ra, jr])
+                    truth = true_dd_integers(world, blk, e, ids.index(solver.name_a), ids.index(solver.name_b),
+                                             res.sats[k], res.refs)
                     checked += k.size
-                    if epoch % 600 == 0:  # the vectorised truth is simdata's
-                        assert all(np.array_equal(truth[i], truth_dd_ambiguity(world, blk, e, ra, rb, str(s),
-                                                                               res.refs[str(s)[0]]))
-                                   for i, s in enumerate(res.sats[k]))
                     for i in np.flatnonzero(~(truth == res.dd_n[k]).all(axis=1)):
                         wrong.append((t0, epoch, solver.name, str(res.sats[k[i]])))
     cold = {key: np.array([rec.get(key, np.inf) for tm in timing.values() for rec in tm.first.values()], float)

@@ -17,65 +17,37 @@ moderate 661 (661), active 4,440 (4,440), storm 474 (472): on rough days the mod
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
-from augnet.centre.network import NetworkSolver
+from stations.network_truth import NetworkRun, network_against_truth
 from stations.scenario import load_scenario
-from stations.world import World
-from tests.centre.simdata import station_epochs
 
 pytestmark = pytest.mark.slow
 
 DURATION_S = 90
 
 
-def _cold_start(level: str, duration_s: int = DURATION_S) -> dict:
+def _cold_start(level: str, duration_s: int = DURATION_S) -> NetworkRun:
+    """network-70km's reference stations from a cold start at this ionosphere level, against the truth."""
     sc = load_scenario("network-70km")
     iono = sc.errors.ionosphere.model_copy(update={"level": level})
     sc = sc.model_copy(update={"duration_s": duration_s, "errors": sc.errors.model_copy(update={"ionosphere": iono})})
-    world = World(sc)
-    ids = world.receiver_ids
-    stations = {r.id: r.ecef[0] for r in world.receivers if not r.id.startswith("check")}
-    net = NetworkSolver(stations)
-    col = {s: j for j, s in enumerate(world.sats)}
-    checked, wrong, fraction = 0, set(), {}
-    for blk in world.epochs():
-        per = {r: station_epochs(world, blk, i) for i, r in enumerate(ids)}
-        for e in range(len(blk.t_gpst)):
-            ne = net.update({r: per[r][e] for r in stations}, world.nav)
-            for solver in net.solvers.values():
-                res = ne.baselines[solver.name]
-                if res is None:
-                    continue
-                fraction[solver.name] = res.fixed_fraction
-                k = np.flatnonzero(res.fixed & ~res.is_reference())
-                if not k.size:
-                    continue
-                ra, rb = ids.index(solver.name_a), ids.index(solver.name_b)
-                j = np.array([col[str(s)] for s in res.sats[k]])
-                jr = np.array([col[res.refs[str(s)[0]]] for s in res.sats[k]])
-                amb = blk.ambiguity_cyc[e][:, :, :2]
-                truth = (amb[rb, j] - amb[ra, j]) - (amb[rb, jr] - amb[ra, jr])
-                checked += k.size
-                for i in np.flatnonzero(~(truth == res.dd_n[k]).all(axis=1)):
-                    wrong.add((solver.name, str(res.sats[k[i]])))
-    levels = {s.name: s.ionosphere.day_ppm for s in net.solvers.values()}
-    return dict(checked=checked, wrong=sorted(wrong), fraction=fraction, day_ppm=levels)
+    return network_against_truth(sc)
 
 
 @pytest.mark.parametrize("level,duration_s,min_checked", [
     ("quiet", 90, 2000), ("moderate", 90, 200), ("active", 300, 200), ("storm", 300, 100)])
 def test_no_wrong_integer_at_any_ionosphere_level(level, duration_s, min_checked):
     out = _cold_start(level, duration_s)
-    print(f"\n{level}: {out['checked']} fixed DD ambiguity-epochs in {duration_s} s, wrong {out['wrong']}, fixed "
-          f"fraction at the end {out['fraction']}, the day's ionosphere level [ppm] {out['day_ppm']}")
-    assert out["wrong"] == []
-    assert out["checked"] >= min_checked  # it does fix, more slowly as the ionosphere gets rougher
+    print(f"\n{level}: {out.checked} fixed DD ambiguity-epochs in {duration_s} s, wrong {sorted(out.wrong_sats)}, "
+          f"fixed fraction at the end {out.last_fixed_fraction}, the day's ionosphere level [ppm] {out.day_ppm}")
+    assert sorted(out.wrong_sats) == []
+    assert sum(out.wrong.values()) == 0
+    assert out.checked >= min_checked  # it does fix, more slowly as the ionosphere gets rougher
 
 
 def test_the_days_level_follows_the_ionosphere():
-    quiet = _cold_start("quiet", 40)["day_ppm"]
-    moderate = _cold_start("moderate", 60)["day_ppm"]
+    quiet = _cold_start("quiet", 40).day_ppm
+    moderate = _cold_start("moderate", 60).day_ppm
     assert all(v is not None for v in list(quiet.values()) + list(moderate.values()))
     assert max(quiet.values()) < min(moderate.values())

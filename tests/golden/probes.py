@@ -123,9 +123,12 @@ def chunk_decode(body: bytes, split: int) -> bytes:
 
 
 def centre_engine(stations: dict, t0: float, name: str = "golden"):
+    """The engine with admission moments off: the recorded VRS bytes are those of the stream before them
+    (decision 0190: off reproduces them; tests/centre/test_vrs_live_admission.py tests on)."""
     from augnet.centre.engine import CentreEngine
+    from augnet.centre.vrs_admission import AdmissionConfig
 
-    return CentreEngine(stations, t0, network_name=name)
+    return CentreEngine(stations, t0, network_name=name, admission=AdmissionConfig(admission=False))
 
 
 def vrs_encoder(msm_level: int):
@@ -324,11 +327,13 @@ async def centre_service_run(stations: dict, t0: float, fixes: dict, feed: list)
     once the previous epoch is solved: per epoch (t, {session: VRS bytes}, bus messages)."""
     import asyncio
 
+    from augnet.centre.vrs_admission import AdmissionConfig
     from augnet.system.centre_service import CentreService, CentreSpec
     from ntrip_caster.gga import GgaFix
 
     reports, bus = [], []
-    spec = CentreSpec({k: tuple(map(float, v)) for k, v in stations.items()}, t0, "golden")
+    spec = CentreSpec({k: tuple(map(float, v)) for k, v in stations.items()}, t0, "golden",
+                      admission=AdmissionConfig(admission=False))  # as centre_engine: the recorded bytes
     svc = CentreService(spec, asyncio.get_running_loop(), on_epoch=lambda r, at: reports.append(r),
                         on_outbox=bus.extend)
     got = {name: bytearray() for name in fixes}

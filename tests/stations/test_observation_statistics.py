@@ -12,6 +12,7 @@ import pytest
 from tests.conftest import LONG_RUN_TIMEOUT_S
 from stations import calibration as cal
 from stations import observation_statistics as ostat
+from stations.network_truth import network_against_truth
 
 F1, F2 = 1575.42e6, 1227.60e6
 C = 299_792_458.0
@@ -156,7 +157,7 @@ def test_network_on_catnet_like_fixes_without_a_wrong_integer():
     from stations.scenario import load_scenario
 
     sc = load_scenario("catnet-like").model_copy(update=dict(duration_s=3 * 3600.0))
-    run = cal.network_against_truth(sc, ("CREU", "EBRE", "GARR"))
+    run = network_against_truth(sc, ("CREU", "EBRE", "GARR"))
     assert run.checked > 1000
     assert sum(run.wrong.values()) == 0
     assert all(f > 0.2 for f in run.fixed_fraction.values())
