@@ -3,6 +3,8 @@ caster on loopback (source addresses 127.0.0.x, Linux routes all of 127/8 to lo)
 
 from __future__ import annotations
 
+import contextlib
+
 import socket
 import threading
 import time
@@ -162,57 +164,65 @@ def test_1000_wrong_passwords_from_one_address_on_loopback():
     assert [a[0] for a in alarms] == [AUTH_FLOOD_ALARM] and alarms[0][4] is False
 
 
+N_STREAM_FRAMES, N_STREAM_TRAINS = 300, 100
+
+
+@contextlib.contextmanager
+def trains_streaming(ct, src, n_trains: int = N_STREAM_TRAINS, n_frames: int = N_STREAM_FRAMES):
+    """n_trains reading BASE01 while the source sends n_frames over ~3 s; yields the list each train received
+    (filled once the block ends) and the bytes sent."""
+    frames = [frame((1005 << 4).to_bytes(2, "big") + i.to_bytes(4, "big") + bytes(40)) for i in range(n_frames)]
+    sent = b"".join(frames)
+    trains = []
+    for _ in range(n_trains):
+        s, head = open_client(ct.port, "BASE01", version=1)  # 127.0.0.1: a known train address after this
+        assert head == b"ICY 200 OK\r\n"
+        trains.append(s)
+    received: list[bytes] = [b""] * n_trains
+
+    def read_train(k: int) -> None:
+        received[k] = read_exactly(trains[k], len(sent), timeout=HANG_GUARD_S)
+
+    def feed() -> None:
+        for f in frames:
+            src.sendall(f)
+            time.sleep(0.01)
+
+    threads = [threading.Thread(target=read_train, args=(k,)) for k in range(n_trains)] + [threading.Thread(target=feed)]
+    for t in threads:
+        t.start()
+    try:
+        yield received, sent
+    finally:
+        for t in threads:
+            t.join(HANG_GUARD_S)
+        for t in trains:
+            t.close()
+
+
 @pytest.mark.slow
 def test_300_concurrent_wrong_passwords_while_trains_stream():
     """300 guesses at once from 300 addresses (half at the trains' name, half at random names, which cost a
     dummy hash each) while 100 trains stream BASE01: every train gets every frame the source sent."""
-    n_frames, n_trains = 300, 100
-    frames = [frame((1005 << 4).to_bytes(2, "big") + i.to_bytes(4, "big") + bytes(40)) for i in range(n_frames)]
-    sent = b"".join(frames)
     with CasterThread(make_config()) as ct:
         alarms: list[tuple] = []
         ct.caster.on_alarm = lambda *a: alarms.append(a)
         src = open_v1_source(ct.port, "BASE01", STATION_PW)
-        trains = []
-        for _ in range(n_trains):
-            s, head = open_client(ct.port, "BASE01", version=1)  # 127.0.0.1: a known train address after this
+        with trains_streaming(ct, src) as (received, sent):
+
+            def guess(i: int) -> int:
+                ip = f"127.0.{1 + i // 200}.{2 + i % 200}"
+                user = "train1" if i % 2 else f"nobody{i}"
+                return _status(_request(ct.port, user, f"guess-{i}", source_ip=ip))
+
+            with ThreadPoolExecutor(300) as pool:
+                statuses = list(pool.map(guess, range(300)))
+            # a train reconnecting from its known address while "train1" is locked for everyone else
+            s, head = open_client(ct.port, "BASE01", version=1)
             assert head == b"ICY 200 OK\r\n"
-            trains.append(s)
-        received: list[bytes] = [b""] * n_trains
-
-        def read_train(k: int) -> None:
-            received[k] = read_exactly(trains[k], len(sent), timeout=HANG_GUARD_S)
-
-        readers = [threading.Thread(target=read_train, args=(k,)) for k in range(n_trains)]
-        for r in readers:
-            r.start()
-
-        def feed() -> None:
-            for f in frames:  # 300 frames over ~3 s, while the flood runs
-                src.sendall(f)
-                time.sleep(0.01)
-
-        feeder = threading.Thread(target=feed)
-        feeder.start()
-
-        def guess(i: int) -> int:
-            ip = f"127.0.{1 + i // 200}.{2 + i % 200}"
-            user = "train1" if i % 2 else f"nobody{i}"
-            return _status(_request(ct.port, user, f"guess-{i}", source_ip=ip))
-
-        with ThreadPoolExecutor(300) as pool:
-            statuses = list(pool.map(guess, range(300)))
-        # a train reconnecting from its known address while "train1" is locked for everyone else
-        s, head = open_client(ct.port, "BASE01", version=1)
-        assert head == b"ICY 200 OK\r\n"
-        s.close()
-        feeder.join(HANG_GUARD_S)
-        for r in readers:
-            r.join(HANG_GUARD_S)
+            s.close()
         snap = ct.snapshot(clients=False)
         src.close()
-        for t in trains:
-            t.close()
     assert all(r == sent for r in received), [len(r) for r in received]
     assert set(statuses) <= {401, 429, 503} and len(statuses) == 300
     c = snap["counters"]
@@ -225,47 +235,19 @@ def test_300_concurrent_wrong_passwords_while_trains_stream():
 def test_1000_wrong_passwords_from_one_address_while_100_trains_stream():
     """The one-address flood of the first test (1,000 guesses in 10 s of the caster's stepped clock) while 100
     trains stream BASE01: every train gets every frame, the guesses are refused 429 after a handful."""
-    n_frames, n_trains = 300, 100
-    frames = [frame((1005 << 4).to_bytes(2, "big") + i.to_bytes(4, "big") + bytes(40)) for i in range(n_frames)]
-    sent = b"".join(frames)
     clock = SteppedClock()
     with CasterThread(make_config()) as ct:
         ct.caster.clock = clock
         src = open_v1_source(ct.port, "BASE01", STATION_PW)
-        trains = []
-        for _ in range(n_trains):
-            s, head = open_client(ct.port, "BASE01", version=1)
-            assert head == b"ICY 200 OK\r\n"
-            trains.append(s)
-        received: list[bytes] = [b""] * n_trains
+        with trains_streaming(ct, src) as (received, sent):
 
-        def read_train(k: int) -> None:
-            received[k] = read_exactly(trains[k], len(sent), timeout=HANG_GUARD_S)
+            def one(i: int) -> int:
+                clock.step(0.01)
+                return _status(_request(ct.port, "train1", f"guess-{i}", source_ip="127.0.0.77"))
 
-        readers = [threading.Thread(target=read_train, args=(k,)) for k in range(n_trains)]
-        for r in readers:
-            r.start()
-
-        def feed() -> None:
-            for f in frames:
-                src.sendall(f)
-                time.sleep(0.01)
-
-        feeder = threading.Thread(target=feed)
-        feeder.start()
-
-        def one(i: int) -> int:
-            clock.step(0.01)
-            return _status(_request(ct.port, "train1", f"guess-{i}", source_ip="127.0.0.77"))
-
-        with ThreadPoolExecutor(8) as pool:
-            statuses = list(pool.map(one, range(1000)))
-        feeder.join(HANG_GUARD_S)
-        for r in readers:
-            r.join(HANG_GUARD_S)
+            with ThreadPoolExecutor(8) as pool:
+                statuses = list(pool.map(one, range(1000)))
         src.close()
-        for t in trains:
-            t.close()
     assert all(r == sent for r in received), [len(r) for r in received]
     assert statuses.count(429) >= 1000 - 2 * FREE_FAILURES and set(statuses) <= {401, 429}
 
