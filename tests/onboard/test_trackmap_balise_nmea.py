@@ -116,7 +116,8 @@ def test_cross_track_offset_sign_and_confirmation_against_the_protection_level(d
     # on the track but with a metre-level (SPP) covariance: never confirmed
     m = db.match(base, np.eye(3) * 1.0)
     assert m.track == "UP" and not m.confirmed
-    assert m.cross_pl_m == pytest.approx(gaussian_k(1e-7) * 1.0, rel=1e-6)
+    # the default K is the allocated per-decision one (1e-9/h over 3600 decisions/h, half fault-free)
+    assert m.cross_pl_m == pytest.approx(gaussian_k(1e-9 * 0.5 / 3600.0) * 1.0, rel=1e-6)
 
 
 def test_protection_levels_project_the_covariance_on_the_track(db):
