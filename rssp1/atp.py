@@ -22,7 +22,9 @@ from dataclasses import dataclass
 
 from rssp1.endpoint import DataReceived, LinkDown
 from rssp1.messages import (
+    Alarm,
     AlarmCode,
+    Severity,
     RbcAck,
     SectionStatus,
     VirtualBaliseTelegram,
@@ -51,7 +53,7 @@ class OnboardAtpLink:
         self.train_id = train_id
         self.max_age_s = max_age_s
         self._next_id = secrets.randbits(32) if first_id is None else first_id & 0xFFFFFFFF
-        self._pending: list[tuple[VirtualBaliseTelegram, float | None]] = []  # (telegram, first sent at)
+        self._pending: list[tuple[VirtualBaliseTelegram | Alarm, float | None]] = []  # (message, first sent at)
         self.stats: Counter[str] = Counter()
 
     def report_balise(
@@ -67,8 +69,16 @@ class OnboardAtpLink:
         self.stats["telegrams"] += 1
         return telegram
 
+    def request_service_brake(self, *, time_ms: int, text: str = "") -> Alarm:
+        """Service-brake request (two consecutive linked groups missed); repeated until acked by id."""
+        alarm = Alarm(time_ms, self._next_id, AlarmCode.SERVICE_BRAKE, Severity.CRITICAL, text=text[:200])
+        self._next_id = (self._next_id + 1) & 0xFFFFFFFF
+        self._pending.append((alarm, None))
+        self.stats["service_brake_requests"] += 1
+        return alarm
+
     @property
-    def pending(self) -> list[VirtualBaliseTelegram]:
+    def pending(self) -> list[VirtualBaliseTelegram | Alarm]:
         return [t for t, _ in self._pending]
 
     def cycle(self, now_s: float) -> list[bytes]:
@@ -90,7 +100,7 @@ class OnboardAtpLink:
                     if isinstance(msg, RbcAck):
                         acked = set(msg.alarm_ids)
                         before = len(self._pending)
-                        self._pending = [(t, f) for t, f in self._pending if t.telegram_id not in acked]
+                        self._pending = [(t, f) for t, f in self._pending if _message_id(t) not in acked]
                         self.stats["acked"] += before - len(self._pending)
 
     @property
@@ -98,9 +108,13 @@ class OnboardAtpLink:
         return self.endpoint.is_up
 
 
+def _message_id(msg: VirtualBaliseTelegram | Alarm) -> int:
+    return msg.telegram_id if isinstance(msg, VirtualBaliseTelegram) else msg.alarm_id
+
+
 @dataclass(frozen=True)
 class AtpEvent:
-    kind: str  # alarm name: LINK_LOST, UNKNOWN_BALISE, MAP_MISMATCH, PASSAGE_ORDER, INTEGRITY_LOST
+    kind: str  # LINK_LOST, UNKNOWN_BALISE, MAP_MISMATCH, PASSAGE_ORDER, INTEGRITY_LOST, SERVICE_BRAKE
     at_s: float
     telegram: VirtualBaliseTelegram | None = None
 
@@ -110,6 +124,7 @@ class AtpSimulator:
         self.endpoint = endpoint
         self.balise_map = dict(balise_map)
         self.passages: list[VirtualBaliseTelegram] = []
+        self.service_brake_requests: list[Alarm] = []
         self.alarms: list[AtpEvent] = []
         self.stats: Counter[str] = Counter()
         self.now_s = 0.0
@@ -124,6 +139,8 @@ class AtpSimulator:
                 for msg in decode_payload(event.data, self.stats).messages:
                     if isinstance(msg, VirtualBaliseTelegram):
                         self._telegram(msg)
+                    elif isinstance(msg, Alarm) and msg.code is AlarmCode.SERVICE_BRAKE:
+                        self._service_brake(msg)
                     else:
                         self.stats["unexpected_message"] += 1
             elif isinstance(event, LinkDown):
@@ -132,6 +149,22 @@ class AtpSimulator:
     def _alarm(self, kind: str, telegram: VirtualBaliseTelegram | None = None) -> None:
         self.alarms.append(AtpEvent(kind, self.now_s, telegram))
         self.stats[f"alarm_{kind.lower()}"] += 1
+
+    def _seen(self, key: int) -> bool:
+        if key in self._recent_ids:
+            self._recent_ids.move_to_end(key)  # acknowledge it again: our last ack may have been lost
+            self.stats["duplicate"] += 1
+            return True
+        self._recent_ids[key] = None
+        if len(self._recent_ids) > RECENT_IDS:
+            self._recent_ids.popitem(last=False)
+        return False
+
+    def _service_brake(self, a: Alarm) -> None:
+        if self._seen(a.alarm_id):
+            return
+        self.service_brake_requests.append(a)
+        self._alarm(AlarmCode.SERVICE_BRAKE.name)
 
     def _telegram(self, t: VirtualBaliseTelegram) -> None:
         key = t.telegram_id

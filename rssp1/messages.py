@@ -45,6 +45,7 @@ class AlarmCode(enum.IntEnum):
     LINK_LOST = 5  # RSSP-I link down / no fresh report
     INTEGRITY_LOST = 6  # onboard integrity alarm
     OPERATOR = 7
+    SERVICE_BRAKE = 8  # onboard -> ATP: two consecutive linked virtual balise groups missed
 
 
 class MessageType(enum.IntEnum):
