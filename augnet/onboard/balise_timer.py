@@ -112,6 +112,12 @@ class TimedBaliseDetector:
         self._last_read: tuple[BaliseGroup, int] | None = None  # (group, direction)
         self._consecutive_misses = 0
         self.service_brake_requested = False
+        self._last_tick = -math.inf
+
+    @property
+    def track(self) -> str | None:
+        """The track of the latest estimate (odometry carries it on when the map match drops out)."""
+        return self._est.track if self._est is not None else None
 
     # -- inputs ---------------------------------------------------------------------------------
     def update(self, time: float, track: str, along_m: float, speed_mps: float, along_var_m2: float,
@@ -139,8 +145,24 @@ class TimedBaliseDetector:
         return best
 
     # -- the timer ------------------------------------------------------------------------------
+    def due_times(self) -> list[float]:
+        """The moments the timer may act on the next group (predicted passage, end of its window, the
+        estimate going stale), so an event-stepped caller can set its clock to them."""
+        e = self._est
+        if e is None or e.speed_mps == 0.0:
+            return []
+        g = self._next_group(e)
+        if g is None:
+            return []
+        t_pass = e.time + (g.along_m - e.along_m) / e.speed_mps
+        _, sigma = self._predict(e, max(t_pass, e.time))
+        window = self.linking_accuracy_m + min(self.k * sigma, self.capture_limit_m)
+        due = {t_pass, t_pass + window / abs(e.speed_mps), e.time + self.max_estimate_age_s + 1e-6}
+        return sorted(d for d in due if d > self._last_tick)
+
     def tick(self, now: float) -> None:
         """Advance the caller's clock: emit every passage (or miss) whose moment has come."""
+        self._last_tick = max(self._last_tick, now)
         e = self._est
         while e is not None and e.speed_mps != 0.0:
             g = self._next_group(e)

@@ -48,6 +48,7 @@ from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
 from augnet.gnss.ephemeris import NavigationData
 from augnet.onboard.along_track_fusion import METHODS, AlongTrackFix, AlongTrackFusion, FusedPosition, FusionSettings
 from augnet.onboard.balise import BaliseEvent, ListSink
+from augnet.onboard.balise_timer import BaliseGroup, ListTimerSink, TimedBaliseDetector
 from augnet.onboard.corrections import CorrectionDecoder
 from augnet.onboard.ntrip_client import DEFAULT_GGA_INTERVAL_S
 from augnet.onboard.observations import EpochObs
@@ -214,6 +215,8 @@ class TrainLog:
     events: list[BaliseEvent] = field(default_factory=list)
     # along-track fusion of the GNSS fixes with the odometer, per method (augnet.onboard.along_track_fusion)
     fused: dict[str, list[FusedPosition]] = field(default_factory=dict)
+    # timer-based virtual balise passages from the weighted median (augnet.onboard.balise_timer)
+    timed_balises: ListTimerSink = field(default_factory=ListTimerSink)
     session_opened_s: float = math.nan
     vrs_moves: int = 0
     gga_sent: int = 0
@@ -269,6 +272,7 @@ class _Train:
     inbox: collections.deque  # (arrival time, bytes), in arrival order (one TCP stream)
     policy: RepositionPolicy
     fusions: dict[str, AlongTrackFusion] = field(default_factory=dict)
+    timer: TimedBaliseDetector | None = None
     base: EpochObs | None = None
     base_station_id: int | None = None
     last_gga_t: float = -math.inf
@@ -326,6 +330,11 @@ class Chain:
             log.fused = {m: [] for m in METHODS}
             self.trains[r.id] = _Train(log, i, unit, CorrectionDecoder(), collections.deque(), RepositionPolicy(),
                                        fusions)
+            if self.track_db is not None:
+                # chainage [m] is the fused axis, so the groups are placed by chainage too
+                groups = [BaliseGroup(b.id, b.track, b.km * 1000.0, b.telegram, b.linked) for b in self.track_db.balises]
+                self.trains[r.id].timer = TimedBaliseDetector(groups, log.timed_balises,
+                                                              k=gaussian_k(unit.integrity_risk))
         self.baselines = {s.name: BaselineLog(s.name, s.name_a, s.name_b, s.length_m)
                           for s in self.engine.network.solvers.values()}
         self.interpolation: dict[str, list[float]] = {p: [] for p in [*self.trains, *self.check_points]}
@@ -554,6 +563,31 @@ class Chain:
         odo = self.odometers.sample(tr.log.id, epoch, t)
         for method, fusion in tr.fusions.items():
             tr.log.fused[method].append(fusion.step(t, odo, fix))
+        if tr.timer is not None:
+            # without a map match (tunnel) the fused position carries on by odometry on the last track
+            self._balise_timer(tr, t, m.track if m is not None and m.track else tr.timer.track)
+
+    def _balise_timer(self, tr: _Train, t: float, track: str | None) -> None:
+        """Step the balise timer to each due moment up to t on the previous estimate, then feed this epoch's."""
+        for _ in range(8):  # a few groups per epoch at most
+            due = [d for d in tr.timer.due_times() if d <= t]
+            if not due:
+                break
+            tr.timer.tick(min(due))
+        tr.timer.tick(t)
+        fused = tr.log.fused["weighted_median"]
+        now = fused[-1]
+        if not track or len(fused) < 2 or not np.isfinite(now.position_m) or not np.isfinite(fused[-2].position_m):
+            return
+        prev = fused[-2]
+        dt = now.time - prev.time
+        sigma = now.pl_m / tr.timer.k
+        if dt <= 0 or not math.isfinite(sigma):
+            return
+        speed = (now.position_m - prev.position_m) / dt
+        # chainage increases with km; speed from two fused positions, variance of the difference
+        tr.timer.update(t, track, now.position_m, speed, sigma ** 2, 2.0 * sigma ** 2 / dt ** 2)
+        tr.timer.tick(t)  # a moment this estimate puts at or before t (missed by the last one) is now
 
     # --- the record ---------------------------------------------------------------------------------
 
