@@ -10,10 +10,13 @@ from augnet.onboard.balise_timer import Miss, Passage
 
 
 class AtpLinkSink:
-    def __init__(self, link: OnboardAtpLink, track_ids: dict[str, int], chainage_mm: dict[int, int]):
+    def __init__(self, link: OnboardAtpLink, track_ids: dict[str, int], chainage_mm: dict,
+                 group_numbers: dict[str, int] | None = None):
         """`track_ids`: track name -> the ATP's numeric track id; `chainage_mm`: group id -> the chainage
-        the ATP's balise map holds for it (the telegram must match it exactly)."""
+        the ATP's balise map holds for it (the telegram must match it exactly); `group_numbers`: the
+        ATP's numeric group id for each map id that is not already an int."""
         self.link = link
+        self.group_numbers = group_numbers or {}
         self.track_ids = track_ids
         self.chainage_mm = chainage_mm
         self.misses: list[Miss] = []
@@ -21,7 +24,8 @@ class AtpLinkSink:
     def passage(self, p: Passage) -> None:
         g = p.group
         self.link.report_balise(
-            time_ms=round(p.time * 1000.0), balise_group=g.id,
+            time_ms=round(p.time * 1000.0),
+            balise_group=g.id if isinstance(g.id, int) else self.group_numbers[g.id],
             location=BaliseLocation(self.track_ids[g.track], self.chainage_mm[g.id]), reverse=p.direction < 0,
             confidence_mm=round(p.confidence_m * 1000.0), speed_mm_s=round(p.speed_mps * 1000.0),
             integrity=SectionStatus.OK)

@@ -34,7 +34,7 @@ LINKED_MISSES_FOR_SERVICE_BRAKE = 2
 
 @dataclass(frozen=True)
 class BaliseGroup:
-    id: int
+    id: int | str  # the track map's id (str in TrackDatabase; the ATP's numeric NID_BG via AtpLinkSink)
     track: str
     along_m: float  # arc length of the group's reference point on its track [m]
     telegram: bytes = b""
@@ -60,7 +60,7 @@ class Miss:
 
 @dataclass(frozen=True)
 class PositionReport:
-    last_group: int | None
+    last_group: int | str | None
     distance_m: float  # signed distance travelled past the last read group, in its direction [m]
     confidence_m: float  # half-width of the confidence interval [m]
 
