@@ -282,3 +282,21 @@ def test_a_centre_without_corrections_yet_is_reported_as_such_not_as_a_huge_age(
     net.step(4)  # reports flow, but the centre has produced no corrections
     alarm = rbc.first_alarm(AlarmCode.CORRECTION_STALE)
     assert alarm is not None and alarm.text == "no corrections yet", alarm
+
+
+def test_service_brake_request_survives_lost_frames_and_is_taken_once():
+    onboard, atp, net = atp_pair()
+    net.step(4)
+    onboard.request_service_brake(time_ms=5, text="2 consecutive linked groups missed")
+    lost = {"n": 0}
+
+    def drop_first(frame):  # the first RSD carrying the request is lost: it must be repeated
+        lost["n"] += 1
+        return lost["n"] == 1
+
+    net.drop_to_right = drop_first
+    net.step(8)
+    assert len(atp.service_brake_requests) == 1 and atp.service_brake_requests[0].code is AlarmCode.SERVICE_BRAKE
+    assert [a.kind for a in atp.alarms].count("SERVICE_BRAKE") == 1
+    assert onboard.pending == [] and onboard.stats["service_brake_requests"] == 1 and lost["n"] > 1
+    assert atp.passages == []  # not mistaken for a balise passage
