@@ -34,7 +34,8 @@ import numpy as np
 
 from augnet.centre.baseline_config import BaselineConfig
 from augnet.centre.ingest import EpochAligner, StationDecoder
-from augnet.centre.network import NetworkEpoch, NetworkSolver
+from augnet.centre.integrity import Alarm
+from augnet.centre.network import MEMBERSHIP_KIND, MembershipChange, NetworkEpoch, NetworkSolver
 from augnet.centre.service_area import AreaAlarm, AreaAnswer, AreaConfig, ServiceArea, refusal_message
 from augnet.centre.vrs import VrsEpoch, VrsPlan, synthesize
 from augnet.centre.vrs_admission import AdmissionBatch, AdmissionConfig, fixed_somewhere
@@ -105,6 +106,7 @@ class CentreEngine:
         self.area = ServiceArea(self.stations, area)  # where sessions may open (service_area.py)
         self.area_alarm = AreaAlarm(network_name)
         self._now = 0.0  # the latest `now` fed or ticked (the area alarm's clock)
+        self.t_ref_gpst = t_ref_gpst
         self.decoders = {name: StationDecoder(name, t_ref_gpst) for name in stations}
         self.aligner = EpochAligner(list(stations))
         self.network = NetworkSolver(self.stations, master=master, config=config)
@@ -183,6 +185,80 @@ class CentreEngine:
                 changed = True
         if changed:
             self.nav = NavigationData(list(self._ephemerides.values()))
+
+    # --- membership: stations join and leave while the engine runs ----------------------------------
+
+    def add_station(self, name: str, xyz, antenna_type: str | None = None) -> MembershipChange:
+        """`name` (ECEF `xyz` [m]) joins: its data is decoded and aligned from now on, baselines to its nearest
+        stations are added (`NetworkSolver.add_station`; the others keep their ambiguities) and the service
+        area grows. ValueError (saying why) for a duplicate or a position off the Earth."""
+        change = self.network.add_station(name, xyz)
+        self.stations[name] = np.asarray(xyz, float).reshape(3)
+        self.decoders[name] = StationDecoder(name, self.t_ref_gpst)
+        self.aligner.add_station(name)
+        self.area = ServiceArea(self.stations, self.area.config)
+        self._plan = None  # planned for the old station set
+        if antenna_type is not None:
+            self._configured_antennas[name] = antenna_type
+            self._use_antenna(name, antenna_type)
+        self._note(change, Alarm(MEMBERSHIP_KIND, name, "info", f"station {name} joined the network: baselines "
+                                 f"{', '.join(change.added) or 'none'}", self._last_t(), cleared=True))
+        return change
+
+    def remove_station(self, name: str) -> MembershipChange:
+        """`name` leaves: its data is no longer read, its baselines are dropped, a master that leaves is replaced,
+        sessions it served as their VRS master are served from another station from the next epoch, and a
+        `station-left` alarm is raised (cleared when it joins again). ValueError for a station not in the
+        network or its last one."""
+        homed = self._sessions_mastered_by(name)
+        change = self.network.remove_station(name)
+        self._forget(name)
+        self.area = ServiceArea(self.stations, self.area.config)
+        self._note(change, Alarm(MEMBERSHIP_KIND, name, "warning",
+                                 f"station {name} left the network: baselines {', '.join(change.dropped) or 'none'} "
+                                 f"dropped" + (f", {', '.join(change.added)} added" if change.added else "")
+                                 + (f"; master {change.master_before} -> {change.master_after}"
+                                    if change.master_before != change.master_after else "")
+                                 + f"; {homed} VRS session(s) re-homed", self._last_t()))
+        return change
+
+    def move_station(self, name: str, xyz) -> MembershipChange:
+        """New coordinates: leave and join (`NetworkSolver.move_station`); its decoder is kept (its stream goes
+        on), its pending epochs are dropped (observed at the old coordinates' solution)."""
+        homed = self._sessions_mastered_by(name)
+        change = self.network.move_station(name, xyz)
+        self.stations[name] = np.asarray(xyz, float).reshape(3)
+        self.aligner.remove_station(name)
+        self.aligner.add_station(name)
+        self.area = ServiceArea(self.stations, self.area.config)
+        self._plan = None
+        self._prev = None
+        self._note(change, None)
+        log.warning("station %s moved: baselines %s restarted; %d VRS session(s) re-homed meanwhile", name,
+                    ", ".join(change.added) or "none", homed)
+        return change
+
+    def _forget(self, name: str) -> None:
+        self.stations.pop(name, None)
+        self.decoders.pop(name, None)
+        self.aligner.remove_station(name)
+        self._configured_antennas.pop(name, None)
+        self.antenna_types.pop(name, None)
+        self._last_eps.pop(name, None)
+        self._plan = None  # its VRS plan may name the station as a master
+        self._prev = None  # the next epoch's VRS are made from its own network epoch, without the station
+
+    def _sessions_mastered_by(self, name: str) -> int:
+        vrs = self.last.vrs if self.last is not None else None
+        return 0 if vrs is None else sum(1 for m in vrs.master if m == name)
+
+    def _last_t(self) -> float:
+        return float(self.last.t_gpst) if self.last is not None else float("nan")
+
+    def _note(self, change: MembershipChange, alarm: Alarm | None) -> None:
+        log.info("network membership: %s", change)
+        if alarm is not None:
+            self.network.integrity.note(alarm)
 
     # --- sessions (one per VRS client) ----------------------------------------------------------
 

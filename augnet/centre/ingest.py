@@ -210,6 +210,22 @@ class EpochAligner:
         self._last_seen[k] = max(now, self._last_seen.get(k, now))
         self.expected.add(ep.station)
 
+    def add_station(self, name: str) -> None:
+        """A station joins: waited for once it delivers (`add`)."""
+        if name not in self.stations:
+            self.stations.append(name)
+
+    def remove_station(self, name: str) -> None:
+        """A station leaves: no longer waited for; its epochs not yet released are dropped."""
+        self.stations = [s for s in self.stations if s != name]
+        self.expected.discard(name)
+        for k in list(self._epochs):
+            self._epochs[k].pop(name, None)
+            if not self._epochs[k]:  # it was the epoch's only station so far
+                del self._epochs[k]
+                self._first_seen.pop(k, None)
+                self._last_seen.pop(k, None)
+
     def ready(self, now: float) -> list[tuple[float, dict[str, StationEpoch]]]:
         out = []
         self.arrivals = {}

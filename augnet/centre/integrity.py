@@ -138,6 +138,30 @@ class IntegrityMonitor:
             return True
         return False
 
+    def add_station(self, name: str) -> None:
+        """A station joins: judged silent only `STATION_TIMEOUT_S` after the latest epoch seen (it has not
+        had a chance to deliver yet)."""
+        if name not in self.memory:
+            self.stations.append(name)
+            self.memory[name] = _StationMemory()
+        seen = [t for t in self.last_seen.values() if np.isfinite(t)]
+        self.last_seen[name] = max(seen) if seen else -np.inf
+
+    def remove_station(self, name: str) -> None:
+        """A station leaves: forgotten; a station-down alarm of it is cleared (it is not down: it is gone)."""
+        if name in self.memory:
+            self.stations.remove(name)
+            del self.memory[name]
+        t = self.last_seen.pop(name, -np.inf)
+        if name in self.down:
+            self.down.discard(name)
+            self._raise(Alarm("station-down", name, "info", f"station {name}: left the network",
+                              t if np.isfinite(t) else float("nan"), cleared=True))
+
+    def note(self, alarm: Alarm) -> None:
+        """An alarm of the caller's (a membership change), delivered with this monitor's next epoch."""
+        self._raise(alarm)
+
     def drain(self) -> list[Alarm]:
         out, self.new_alarms = self.new_alarms, []
         return out

@@ -39,6 +39,26 @@ from augnet.gnss.ephemeris import NavigationData
 from augnet.gnss.geometry import ecef_to_enu
 
 NEIGHBOURS_PER_STATION = 2
+# A station this close to another is the same place twice (a typo or a duplicate entry): a baseline of a few
+# metres has no ionosphere or troposphere to resolve and both stations would be one to the interpolation.
+MIN_STATION_SEPARATION_M = 1.0
+# ECEF radius of a place a reference station may stand: from the Dead Sea shore (WGS84 polar radius 6,356.8 km
+# less 1 km) to far above the highest summit (equatorial radius 6,378.1 km plus 10 km).
+MIN_STATION_RADIUS_M = 6_355_000.0
+MAX_STATION_RADIUS_M = 6_389_000.0
+MEMBERSHIP_KIND = "station-left"  # alarm kind: a station left the network (raised) / joined it again (cleared)
+
+
+@dataclass(frozen=True)
+class MembershipChange:
+    """What one add / remove / move did to the network (for the log, the alarm and the tests)."""
+
+    station: str
+    action: str  # "add" | "remove" | "move"
+    added: tuple[str, ...]  # baselines created (their ambiguities start afresh)
+    dropped: tuple[str, ...]  # baselines removed with their state
+    master_before: str | None
+    master_after: str | None
 
 
 def choose_baselines(names: list[str], xyz: np.ndarray, k: int = NEIGHBOURS_PER_STATION) -> list[tuple[int, int]]:
@@ -156,6 +176,151 @@ class NetworkSolver:
                 solver.antenna["a"] = antenna
             if solver.name_b == name:
                 solver.antenna["b"] = antenna
+
+    # --- membership: stations join and leave a running network --------------------------------------------
+
+    def station_problem(self, name: str, xyz) -> str | None:
+        """Why `name` at `xyz` (ECEF [m]) cannot join the network, or None."""
+        if not isinstance(name, str) or not name.strip():
+            return "a station needs a non-empty name"
+        if name in self.clocks:
+            return f"station {name} is already in the network"
+        return self._position_problem(name, xyz)
+
+    def _position_problem(self, name: str, xyz, ignore: str | None = None) -> str | None:
+        p = np.asarray(xyz, dtype=float).reshape(-1)
+        if p.shape != (3,) or not np.all(np.isfinite(p)):
+            return f"station {name}: position must be 3 finite ECEF coordinates [m]"
+        r = float(np.linalg.norm(p))
+        if not MIN_STATION_RADIUS_M <= r <= MAX_STATION_RADIUS_M:
+            return (f"station {name}: position {r / 1000:.1f} km from the Earth's centre is not on the Earth's "
+                    f"surface ({MIN_STATION_RADIUS_M / 1000:.0f}..{MAX_STATION_RADIUS_M / 1000:.0f} km)")
+        others = [k for k, n in enumerate(self.names) if n != ignore]
+        if others:
+            d = np.linalg.norm(self.xyz[others] - p, axis=1)
+            k = int(np.argmin(d))
+            if d[k] < MIN_STATION_SEPARATION_M:
+                return f"station {name}: {d[k]:.2f} m from station {self.names[others[k]]} (the same place twice)"
+        return None
+
+    def add_station(self, name: str, xyz, antenna: ReceiverAntenna | None = None) -> MembershipChange:
+        """`name` joins from the next epoch: baselines to it by the network's rule (`choose_baselines` over every
+        station: the new station's edges among them); every existing baseline keeps its solver, so its fixed
+        ambiguities. ValueError (saying why) for a duplicate or a position off the Earth."""
+        problem = self.station_problem(name, xyz)
+        if problem is not None:
+            raise ValueError(problem)
+        if antenna is not None:
+            self.antennas[name] = antenna
+        names = self.names + [name]
+        xyz_all = np.vstack([self.xyz.reshape(-1, 3), np.asarray(xyz, float).reshape(1, 3)])
+        new = len(names) - 1
+        edges = [e for e in choose_baselines(names, xyz_all) if new in e] if len(names) > 1 else []
+        pairs = self._pairs()
+        added = [(names[i], names[j]) for i, j in edges]
+        before = self.master
+        self._relink(names, xyz_all, pairs, added, self.master if len(self.names) else None)
+        self.clocks[name] = 0.0
+        self.integrity.add_station(name)
+        return MembershipChange(name, "add", tuple(f"{a}-{b}" for a, b in added), (), before, self.master)
+
+    def remove_station(self, name: str) -> MembershipChange:
+        """`name` leaves from the next epoch: its baselines and their state are dropped; if that splits the network,
+        the shortest baselines of `choose_baselines` over the rest that join the parts are added; a master that
+        leaves is replaced by the central station of the rest. ValueError for a station not in the network or
+        the last one (a network of none serves nobody: disable its data instead)."""
+        if name not in self.clocks:
+            raise ValueError(f"station {name} is not in the network")
+        if len(self.names) == 1:
+            raise ValueError(f"station {name} is the network's last station: it cannot leave")
+        k = self.names.index(name)
+        names = [n for n in self.names if n != name]
+        xyz = np.delete(self.xyz, k, axis=0)
+        pairs = {p: s for p, s in self._pairs().items() if name not in p}
+        dropped = tuple(s.name for p, s in self._pairs().items() if name in p)
+        added = self._reconnect(names, xyz, list(pairs))
+        before = self.master
+        self._relink(names, xyz, pairs, added, None if self.master == name else self.master)
+        self.clocks.pop(name, None)
+        self.antennas.pop(name, None)
+        self.integrity.remove_station(name)
+        return MembershipChange(name, "remove", tuple(f"{a}-{b}" for a, b in added), dropped, before, self.master)
+
+    def move_station(self, name: str, xyz) -> MembershipChange:
+        """New coordinates for `name`: leave and join (its baselines restart from the new position: a network
+        fixed on wrong coordinates poisons every correction); the other baselines are kept."""
+        if name not in self.clocks:
+            raise ValueError(f"station {name} is not in the network")
+        problem = self._position_problem(name, xyz, ignore=name)
+        if problem is not None:
+            raise ValueError(problem)
+        if len(self.names) == 1:
+            self._relink([name], np.asarray(xyz, float).reshape(1, 3), {}, [], name)
+            self.integrity.remove_station(name)
+            self.integrity.add_station(name)
+            return MembershipChange(name, "move", (), (), name, name)
+        antenna = self.antennas.get(name)
+        left = self.remove_station(name)
+        joined = self.add_station(name, xyz, antenna)
+        return MembershipChange(name, "move", joined.added, left.dropped, left.master_before, joined.master_after)
+
+    def _pairs(self) -> dict[tuple[str, str], BaselineSolver]:
+        return {(self.names[i], self.names[j]): s for (i, j), s in self.solvers.items()}
+
+    @staticmethod
+    def _reconnect(names: list[str], xyz: np.ndarray, pairs: list[tuple[str, str]]) -> list[tuple[str, str]]:
+        """Baselines of `choose_baselines` over `names`, shortest first, that join the parts `pairs` leave apart."""
+        parent = {n: n for n in names}
+
+        def root(n):
+            while parent[n] != n:
+                parent[n] = parent[parent[n]]
+                n = parent[n]
+            return n
+
+        for a, b in pairs:
+            parent[root(a)] = root(b)
+        if len({root(n) for n in names}) <= 1:
+            return []
+        cand = choose_baselines(names, xyz)
+        cand.sort(key=lambda e: float(np.linalg.norm(xyz[e[0]] - xyz[e[1]])))
+        out = []
+        for i, j in cand:
+            ra, rb = root(names[i]), root(names[j])
+            if ra != rb:
+                parent[ra] = rb
+                out.append((names[i], names[j]))
+        return out
+
+    def _relink(self, names: list[str], xyz: np.ndarray, pairs: dict[tuple[str, str], BaselineSolver],
+                added: list[tuple[str, str]], master: str | None) -> None:
+        """Index everything again over `names` (in their order): the kept solvers under their new indices, new
+        ones for `added`, the triangles, the master's east/north frame, the hint geometry; last epoch's hints
+        follow their baselines."""
+        old = {e: (self.names[e[0]], self.names[e[1]]) for e in self.solvers}
+        hints = {old[e]: h for e, h in self._hints.items() if e in old}
+        model_hints = {old[e]: h for e, h in self._model_hints.items() if e in old}
+        self.names = list(names)
+        self.xyz = np.asarray(xyz, float).reshape(-1, 3)
+        pos = {n: i for i, n in enumerate(self.names)}
+        solvers = {}
+        for (a, b), s in pairs.items():
+            solvers[(pos[a], pos[b])] = s
+        for a, b in added:
+            i, j = sorted((pos[a], pos[b]))
+            solvers[(i, j)] = BaselineSolver(self.names[i], self.xyz[i], self.names[j], self.xyz[j], self.cfg,
+                                             self.antennas.get(self.names[i]), self.antennas.get(self.names[j]))
+        self.solvers = dict(sorted(solvers.items()))
+        self.edges = sorted(self.solvers)
+        self.triangles = triangles(self.edges)
+        self.master = master if master in pos else self._central_station()
+        m = pos[self.master]
+        self.order = [m] + [i for i in range(len(self.names)) if i != m]
+        self.en = ecef_to_enu(self.xyz - self.xyz[m], self.xyz[m])[:, :2]
+        self.ionosphere_hints = IonosphereHints(self.edges, self.en, self.cfg)
+        back = {(self.names[i], self.names[j]): (i, j) for i, j in self.edges}
+        self._hints = {back[p]: h for p, h in hints.items() if p in back}
+        self._model_hints = {back[p]: h for p, h in model_hints.items() if p in back}
 
     def _central_station(self) -> str:
         c = self.xyz.mean(axis=0)
