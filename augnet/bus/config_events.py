@@ -1,5 +1,5 @@
 """Configuration change events: the console tells every caster node that an operator changed a caster
-user or mountpoint in the store (decision 0180).
+user or mountpoint in the store (decision 0180), and every centre that a station changed (decision 0240).
 
 An event names what changed, never the new values: the store stays the one source of truth, and no
 password hash travels on the bus (JetStream keeps messages on disk for minutes). A node that receives
@@ -15,13 +15,15 @@ from augnet.bus.core import Bus
 
 # The one subject of caster configuration changes (inside JetStream's `augnet.>` stream).
 CASTER_CONFIG_SUBJECT = "augnet.config.caster"
-CHANGE_KINDS = ("user", "mountpoint")
+# ... and of the station registry (the centre's membership: `augnet.system.station_membership`).
+STATIONS_CONFIG_SUBJECT = "augnet.config.stations"
+CHANGE_KINDS = ("user", "mountpoint", "station")
 MAX_EVENT_BYTES = 1024  # an event is a kind, a name (<= 64 characters in the store) and an action
 
 
 @dataclass(frozen=True, slots=True)
 class CasterChange:
-    kind: str  # "user" | "mountpoint"
+    kind: str  # "user" | "mountpoint" | "station"
     name: str
     action: str  # "add" | "edit" | "delete"
 
@@ -46,4 +48,5 @@ def decode_change(payload: bytes) -> CasterChange:
 
 
 async def publish_change(bus: Bus, change: CasterChange) -> None:
-    await bus.publish(CASTER_CONFIG_SUBJECT, change.encode())
+    subject = STATIONS_CONFIG_SUBJECT if change.kind == "station" else CASTER_CONFIG_SUBJECT
+    await bus.publish(subject, change.encode())

@@ -61,6 +61,24 @@ class MembershipChange:
     master_after: str | None
 
 
+def station_position_problem(name: str, xyz, others: dict[str, np.ndarray]) -> str | None:
+    """Why `name` cannot stand at `xyz` (ECEF [m]) beside the stations `others` (name -> ECEF), or None."""
+    p = np.asarray(xyz, dtype=float).reshape(-1)
+    if p.shape != (3,) or not np.all(np.isfinite(p)):
+        return f"station {name}: position must be 3 finite ECEF coordinates [m]"
+    r = float(np.linalg.norm(p))
+    if not MIN_STATION_RADIUS_M <= r <= MAX_STATION_RADIUS_M:
+        return (f"station {name}: position {r / 1000:.1f} km from the Earth's centre is not on the Earth's "
+                f"surface ({MIN_STATION_RADIUS_M / 1000:.0f}..{MAX_STATION_RADIUS_M / 1000:.0f} km)")
+    if others:
+        names = list(others)
+        d = np.linalg.norm(np.asarray([others[n] for n in names], float).reshape(-1, 3) - p, axis=1)
+        k = int(np.argmin(d))
+        if d[k] < MIN_STATION_SEPARATION_M:
+            return f"station {name}: {d[k]:.2f} m from station {names[k]} (the same place twice)"
+    return None
+
+
 def choose_baselines(names: list[str], xyz: np.ndarray, k: int = NEIGHBOURS_PER_STATION) -> list[tuple[int, int]]:
     """Edges (i, j), i < j: every station to its k nearest, plus a minimum spanning tree."""
     n = len(names)
@@ -188,20 +206,8 @@ class NetworkSolver:
         return self._position_problem(name, xyz)
 
     def _position_problem(self, name: str, xyz, ignore: str | None = None) -> str | None:
-        p = np.asarray(xyz, dtype=float).reshape(-1)
-        if p.shape != (3,) or not np.all(np.isfinite(p)):
-            return f"station {name}: position must be 3 finite ECEF coordinates [m]"
-        r = float(np.linalg.norm(p))
-        if not MIN_STATION_RADIUS_M <= r <= MAX_STATION_RADIUS_M:
-            return (f"station {name}: position {r / 1000:.1f} km from the Earth's centre is not on the Earth's "
-                    f"surface ({MIN_STATION_RADIUS_M / 1000:.0f}..{MAX_STATION_RADIUS_M / 1000:.0f} km)")
-        others = [k for k, n in enumerate(self.names) if n != ignore]
-        if others:
-            d = np.linalg.norm(self.xyz[others] - p, axis=1)
-            k = int(np.argmin(d))
-            if d[k] < MIN_STATION_SEPARATION_M:
-                return f"station {name}: {d[k]:.2f} m from station {self.names[others[k]]} (the same place twice)"
-        return None
+        others = {n: self.xyz[k] for k, n in enumerate(self.names) if n != ignore}
+        return station_position_problem(name, xyz, others)
 
     def add_station(self, name: str, xyz, antenna: ReceiverAntenna | None = None) -> MembershipChange:
         """`name` joins from the next epoch: baselines to it by the network's rule (`choose_baselines` over every

@@ -86,6 +86,14 @@ def list_stations(session: Session) -> list[Station]:
     return list(session.scalars(select(Station).order_by(Station.code)))
 
 
+def delete_station(session: Session, actor: str, code: str) -> None:
+    """The station leaves the registry (and so the running network: `augnet.system.station_membership`)."""
+    st = get_station(session, code)
+    audit(session, actor, "station.delete", code, xyz_m=[st.x_m, st.y_m, st.z_m], mountpoint=st.mountpoint,
+          rtcm_station_id=st.rtcm_station_id)
+    session.delete(st)
+
+
 # --- alarms -----------------------------------------------------------------------------------------
 
 def raise_alarm(session: Session, kind: str, subject: str, severity: Severity, message: str = "") -> Alarm:
@@ -366,6 +374,16 @@ def update_mountpoint(session: Session, actor: str, name: str, **changes) -> Mou
         setattr(mp, k, v)
     audit(session, actor, "mountpoint.edit", name, before=before, after=changes)
     return mp
+
+
+def delete_mountpoint(session: Session, actor: str, name: str) -> None:
+    """Conflict while a registered station streams to it (delete or re-point the station first)."""
+    mp = get_mountpoint(session, name)
+    users = [st.code for st in session.scalars(select(Station).where(Station.mountpoint == name))]
+    if users:
+        raise Conflict(f"mountpoint {name} carries station {', '.join(users)}: delete or re-point the station first")
+    session.delete(mp)
+    audit(session, actor, "mountpoint.delete", name, kind=mp.kind)
 
 
 # --- console: trains --------------------------------------------------------------------------------

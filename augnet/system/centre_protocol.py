@@ -31,6 +31,8 @@ Loop -> centre (the loop writes the messages of one loop iteration together, in 
     MoveSession     the client moved (the caster's reposition policy); opened and moved sessions are added
                     to the next epoch's plan between epochs (`centre_service.PLAN_UPDATE_S`)
     CloseSession
+    StationMembership  a station joins (`xyz_m` given, not yet a member), moves (given, a member) or leaves
+                    (None): the store's station table changed (`station_membership.py`)
     VrsWritten      the last group of epoch t's VRS is written to the sockets: the centre may solve the network
     Stop            finish and exit (EOF on the socket does the same)
 Centre -> loop:
@@ -120,6 +122,12 @@ class CloseSession:
 
 
 @dataclass(frozen=True, slots=True)
+class StationMembership:
+    station: str
+    xyz_m: tuple[float, float, float] | None  # ECEF [m]; None: the station leaves
+
+
+@dataclass(frozen=True, slots=True)
 class VrsWritten:
     t_gpst: float
 
@@ -167,10 +175,10 @@ class Alive:
     pass
 
 
-LoopMessage = StationData | OpenSession | MoveSession | CloseSession | VrsWritten | Stop
+LoopMessage = StationData | OpenSession | MoveSession | CloseSession | StationMembership | VrsWritten | Stop
 CentreMessage = Ready | VrsGroup | EpochsSolved | CentreError | Alive
 Message = LoopMessage | CentreMessage
-FROM_LOOP = (StationData, OpenSession, MoveSession, CloseSession, VrsWritten, Stop)
+FROM_LOOP = (StationData, OpenSession, MoveSession, CloseSession, StationMembership, VrsWritten, Stop)
 FROM_CENTRE = (Ready, VrsGroup, EpochsSolved, CentreError, Alive)
 
 
@@ -473,6 +481,7 @@ LAYOUTS: dict[int, _Record] = {
     4: _Record(CloseSession, (("client_id", STR),)),
     5: _Record(VrsWritten, (("t_gpst", F64),)),
     6: _Record(Stop, ()),
+    7: _Record(StationMembership, (("station", STR), ("xyz_m", _Optional(_Tuple(F64, 3))))),
     16: _Record(Ready, (("pid", I64),)),
     17: _Record(VrsGroup, (("t_gpst", F64), ("client_ids", SEPARATED_STRS), ("rtcm", PACKED_BYTES),
                            ("ready_unix_s", F64), ("arrival", _Optional(_Tuple(F64, 2))),

@@ -39,7 +39,7 @@ import socket
 import sys
 import time
 import traceback
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
@@ -50,7 +50,8 @@ from augnet.centre.vrs_admission import AdmissionConfig
 from augnet.gnss import time as gtime
 from augnet.system.centre_protocol import (
     FROM_CENTRE, FROM_LOOP, Alive, CentreError, CloseSession, Decoder, EpochsSolved, Message, MoveSession,
-    OpenSession, ProtocolError, Ready, StationData, Stop, VrsGroup, VrsWritten, encode)
+    OpenSession, ProtocolError, Ready, StationData, StationMembership, Stop, VrsGroup, VrsWritten, encode)
+from augnet.centre.network import station_position_problem
 from augwire.errors import StreamRefused
 
 log = logging.getLogger(__name__)
@@ -167,6 +168,10 @@ class CentreService:
         self.protocol_errors = 0  # unreadable frames from the centre (each also ends that centre process)
         self.restarts = 0
         self.excluded_stations: set[str] = set()
+        # the network's stations now (the spec's at start, then as the store's table changes): a restarted
+        # centre is built from these
+        self.station_xyz: dict[str, tuple[float, float, float]] = {k: tuple(map(float, v))
+                                                                   for k, v in spec.stations.items()}
         # positions are checked here, on the loop, so that a refusal reaches the client and the alarm store
         # (the centre's engine checks them again)
         self.area = ServiceArea({k: np.asarray(v, float) for k, v in spec.stations.items()}, spec.area)
@@ -189,7 +194,7 @@ class CentreService:
 
     @property
     def stations(self) -> list[str]:
-        return list(self.spec.stations)
+        return list(self.station_xyz)
 
     def delivering(self) -> bool:
         """True while an epoch's VRS are being written to the sinks: its first group is, its last is not yet
@@ -209,7 +214,7 @@ class CentreService:
     # --- loop side: the caster's taps and VRS mountpoint ------------------------------------------------
 
     def feed(self, station: str, data: bytes) -> None:
-        if station not in self.excluded_stations:
+        if station in self.station_xyz and station not in self.excluded_stations:
             self._send(StationData(station, data, time.time()))
 
     def open(self, client_id: str, mount: str, fix, sink) -> _Handle:
@@ -256,6 +261,43 @@ class CentreService:
             self.excluded_stations.discard(station)
         else:
             self.excluded_stations.add(station)
+
+    # --- membership: the store's station table changed (`station_membership.py`) -------------------------
+
+    def add_station(self, station: str, xyz) -> None:
+        """`station` (ECEF `xyz` [m]) joins the network; ValueError (saying why) for a member or a bad position."""
+        if station in self.station_xyz:
+            raise ValueError(f"station {station} is already in the network")
+        self._place(station, xyz, ignore=None)
+
+    def move_station(self, station: str, xyz) -> None:
+        """New coordinates for a member: its baselines restart there (the centre's `move_station`)."""
+        if station not in self.station_xyz:
+            raise ValueError(f"station {station} is not in the network")
+        self._place(station, xyz, ignore=station)
+
+    def _place(self, station: str, xyz, ignore: str | None) -> None:
+        others = {k: np.asarray(v) for k, v in self.station_xyz.items() if k != ignore}
+        problem = station_position_problem(station, xyz, others)
+        if problem is not None:
+            raise ValueError(problem)
+        self.station_xyz[station] = tuple(float(v) for v in np.asarray(xyz, float).reshape(3))
+        self._new_area()
+        self._send(StationMembership(station, self.station_xyz[station]))
+
+    def remove_station(self, station: str) -> None:
+        """`station` leaves the network (its data is no longer read); ValueError for a non-member or the last one."""
+        if station not in self.station_xyz:
+            raise ValueError(f"station {station} is not in the network")
+        if len(self.station_xyz) == 1:
+            raise ValueError(f"station {station} is the network's last station: it cannot leave")
+        del self.station_xyz[station]
+        self.excluded_stations.discard(station)
+        self._new_area()
+        self._send(StationMembership(station, None))
+
+    def _new_area(self) -> None:
+        self.area = ServiceArea({k: np.asarray(v, float) for k, v in self.station_xyz.items()}, self.spec.area)
 
     def _send(self, cmd: Message) -> None:
         self._pending.append(cmd)
@@ -309,7 +351,10 @@ class CentreService:
         for sock in (mine, theirs):  # room for a whole epoch of VRS in flight (capped by net.core.wmem_max)
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SOCKET_BUFFER_BYTES)
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, SOCKET_BUFFER_BYTES)
-        proc = ctx.Process(target=_child_main, args=(theirs, self.spec), name="augnet-centre", daemon=True)
+        # built from the stations as they are now: membership changes queued for the last centre are in it
+        spec = replace(self.spec, stations=dict(self.station_xyz))
+        self._pending = [c for c in self._pending if not isinstance(c, StationMembership)]
+        proc = ctx.Process(target=_child_main, args=(theirs, spec), name="augnet-centre", daemon=True)
         proc.start()
         theirs.close()
         self._proc = proc
@@ -642,6 +687,13 @@ class _CentreWorker:
                 eng.move_session(cmd.client_id, cmd.lat_deg, cmd.lon_deg, cmd.h_m)
             elif isinstance(cmd, CloseSession):
                 eng.close_session(cmd.client_id)
+            elif isinstance(cmd, StationMembership):
+                if cmd.xyz_m is None:
+                    eng.remove_station(cmd.station)
+                elif cmd.station in eng.stations:
+                    eng.move_station(cmd.station, cmd.xyz_m)
+                else:
+                    eng.add_station(cmd.station, cmd.xyz_m)
         except Exception:  # noqa: BLE001 - bad input never stops the centre: reported, then ignored
             self._error(f"{type(cmd).__name__} failed")
 

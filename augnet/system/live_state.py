@@ -24,26 +24,35 @@ LINE_POLYLINE_POINTS = 400  # the line's drawing on the console's map has at mos
 KMH_PER_M_S = 3.6
 
 
-def make_live_state(world, stations, station_km: dict[str, float], caster_snapshot, on_station_change):
-    """The console's `LiveState` with the stations (all down until their data arrives) and the line drawn,
-    or None when the console is not installed. `caster_snapshot()` answers the console's caster page;
-    `on_station_change(code, fields)` carries an operator's change back to the system."""
+def make_live_state(world, records: dict, caster_snapshot, on_station_change):
+    """The console's `LiveState` with the registry's stations (`persistence.StationRecord` by code; all down
+    until their data arrives) and the line drawn, or None when the console is not installed.
+    `caster_snapshot()` answers the console's caster page; `on_station_change(code, fields)` carries an
+    operator's change back to the system."""
     try:
-        from augnet.console.live import LiveState, StationLive
+        from augnet.console.live import LiveState
     except ImportError:  # console not installed: the system runs without it
         return None
     live = LiveState()
-    for rx in stations:
-        llh = ecef_to_geodetic(rx.ecef[0])
-        live.update_station(StationLive(id=rx.id, station_id=rx.rtcm_id, lat_deg=float(np.degrees(llh[0])),
-                                        lon_deg=float(np.degrees(llh[1])), h_m=float(llh[2]),
-                                        along_km=station_km.get(rx.id), up=False, enabled=True,
-                                        last_data_age_s=None, satellites=0))
+    for rec in records.values():
+        live.update_station(station_live(rec, world))
     if world.track is not None:
         live.set_line(line_drawing(world))
     live.caster_snapshot = caster_snapshot
     live.on_station_change = on_station_change
     return live
+
+
+def station_live(record, world):
+    """The console's live row of a registered station (`persistence.StationRecord`) the network just took in:
+    down until its data arrives, placed along the line when there is one."""
+    from augnet.console.live import StationLive
+    from augnet.system.run_config import along_line_km
+
+    llh = ecef_to_geodetic(np.asarray(record.xyz_m, float))
+    return StationLive(id=record.code, station_id=record.rtcm_station_id, lat_deg=float(np.degrees(llh[0])),
+                       lon_deg=float(np.degrees(llh[1])), h_m=float(llh[2]), along_km=along_line_km(world, record.xyz_m), up=False, enabled=record.enabled, last_data_age_s=None,
+                       satellites=0)
 
 
 def line_drawing(world) -> dict:

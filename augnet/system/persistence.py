@@ -10,6 +10,7 @@ from __future__ import annotations
 import concurrent.futures
 import datetime as dt
 import logging
+from dataclasses import dataclass
 from typing import Callable
 
 from sqlalchemy import select
@@ -25,6 +26,7 @@ log = logging.getLogger(__name__)
 
 SYSTEM_ACTOR = "system"  # audit-log actor for what the running system itself records
 SEED_ACTION = "caster.seed"  # the audit entry that marks a store's caster configuration as seeded
+STATIONS_SEED_ACTION = "stations.seed"  # ... and its station registry
 QUALITY_INTERVAL_S = 10.0  # one quality-history row per baseline this often
 
 
@@ -130,8 +132,39 @@ def close_train_session(s: Session, session_id: int, bytes_sent: int, fix_rate: 
         ts.fix_rate = fix_rate
 
 
-def station_enabled_map(s: Session) -> dict[str, bool]:
-    return {st.code: bool(st.enabled) for st in s.scalars(select(Station))}
+@dataclass(frozen=True, slots=True)
+class StationRecord:
+    """A station as the store registers it: what the running network takes from it."""
+
+    code: str
+    xyz_m: tuple[float, float, float]  # ECEF ARP [m]
+    enabled: bool
+    mountpoint: str  # the caster mountpoint its stream arrives on
+    rtcm_station_id: int
+
+
+def station_records(s: Session) -> dict[str, StationRecord]:
+    """Every registered station by code."""
+    return {st.code: StationRecord(st.code, (float(st.x_m), float(st.y_m), float(st.z_m)), bool(st.enabled),
+                                   st.mountpoint, int(st.rtcm_station_id))
+            for st in s.scalars(select(Station).order_by(Station.code))}
+
+
+def seed_stations(s: Session, stations) -> bool:
+    """Register the scenario's `stations` (receivers: id, ecef, rtcm_id; mountpoint named by `mountpoint_of`)
+    once per store, while it has no station and no seed was recorded: afterwards the registry alone decides
+    (a station an operator deleted stays deleted, even when every one was). True: seeded."""
+    from stations.live import mountpoint_of
+
+    if s.scalar(select(AuditEntry.id).where(AuditEntry.action == STATIONS_SEED_ACTION).limit(1)) is not None:
+        return False
+    seeded = s.scalar(select(Station.id).limit(1)) is None
+    for rx in stations if seeded else ():
+        register_station(s, rx.id, rx.id, rx.ecef[0], rx.rtcm_id, mountpoint_of("station", rx.id))
+    queries.audit(s, SYSTEM_ACTOR, STATIONS_SEED_ACTION, "stations", seeded=seeded,
+                  stations=[rx.id for rx in stations] if seeded else [])
+    s.flush()
+    return seeded
 
 
 def record_quality_batch(s: Session, at: dt.datetime, rows: list[tuple[str, float, float | None, int]],

@@ -58,33 +58,36 @@ def scenario_for_run(settings: SystemSettings, now_gpst: float | None = None) ->
 
 
 def station_along_km(world: World, stations) -> dict[str, float]:
-    """Each station's place along the line [km]: the nearest point of the track's centre line (none
-    without a line)."""
+    """Each station's place along the line [km] (none without a line)."""
     if world.track is None:
         return {}
-    out = {}
-    for rx in stations:
-        llh = ecef_to_geodetic(rx.ecef[0])
-        en = world.track.geodetic_to_plane(np.degrees(llh[0]), np.degrees(llh[1]))
-        d = np.linalg.norm(world.track.centre_xy - en, axis=1)
-        out[rx.id] = float(world.track.s_m[int(np.argmin(d))] / 1000.0)
-    return out
+    return {rx.id: along_line_km(world, rx.ecef[0]) for rx in stations}
+
+
+def along_line_km(world: World, xyz_m) -> float | None:
+    """The place along the line [km] of ECEF `xyz_m`: the nearest point of the track's centre line (None
+    without a line)."""
+    if world is None or world.track is None:
+        return None
+    llh = ecef_to_geodetic(np.asarray(xyz_m, float))
+    en = world.track.geodetic_to_plane(np.degrees(llh[0]), np.degrees(llh[1]))
+    d = np.linalg.norm(world.track.centre_xy - en, axis=1)
+    return float(world.track.s_m[int(np.argmin(d))] / 1000.0)
 
 
 def register_run(db, stations, cfg: CasterConfig, accounts: dict[str, tuple[str | None, str, str]]
-                 ) -> tuple[dict[str, bool], dict[str, str | None]]:
-    """Store the run's configuration (in the store writer's session `db`): the stations the store does not
-    know, and the scenario's caster users and mountpoints `cfg` into a store that has none yet (decision
-    0180: after that the store alone decides). `accounts`: for each of the run's own caster users, the
-    password of the last state file (or None), a fresh one and its hash (`cfg` holds that hash). Returns
-    each station's enabled flag and the password each own account logs in with (None: it cannot)."""
-    enabled = {}
-    for rx in stations:
-        enabled[rx.id] = persistence.register_station(db, rx.id, rx.id, rx.ecef[0], rx.rtcm_id,
-                                                      mountpoint_of("station", rx.id))
+                 ) -> tuple[dict[str, persistence.StationRecord], dict[str, str | None]]:
+    """Store the run's configuration (in the store writer's session `db`): the scenario's stations into a store
+    that never had any, its caster users and mountpoints `cfg` into one that has none yet (decision 0180: after that
+    the store alone decides, so a station or user an operator deleted stays deleted). `accounts`: for each of
+    the run's own caster users, the password of the last state file (or None), a fresh one and its hash (`cfg`
+    holds that hash). Returns the store's stations (what the network is built from) and the password each own
+    account logs in with (None: it cannot)."""
+    persistence.seed_stations(db, stations)
+    records = persistence.station_records(db)
     if persistence.seed_caster(db, cfg):
-        return enabled, {name: fresh for name, (_known, fresh, _h) in accounts.items()}
-    return enabled, {name: persistence.own_account_password(db, name, known, fresh, fresh_hash)
+        return records, {name: fresh for name, (_known, fresh, _h) in accounts.items()}
+    return records, {name: persistence.own_account_password(db, name, known, fresh, fresh_hash)
                      for name, (known, fresh, fresh_hash) in accounts.items()}
 
 

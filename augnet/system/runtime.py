@@ -34,7 +34,7 @@ from augnet.onboard.trackmap import TrackDatabase
 from augnet.system import persistence
 from augnet.system.centre_service import CentreService, CentreSpec
 from augnet.system.history_series import series_values
-from augnet.system.live_state import LivePublisher, make_live_state
+from augnet.system.live_state import LivePublisher, make_live_state, station_live
 from augnet.system.run_config import (STATION_USER, TRAIN_USER, VRS_MOUNT, caster_config, register_run,
                                       scenario_for_run, station_along_km)
 from augnet.system.run_report import RunReport, run_report
@@ -52,7 +52,6 @@ log = logging.getLogger(__name__)
 
 ADMIN_NAME = "admin"
 LOCALHOST = "127.0.0.1"  # the in-process stations and trains reach the caster here
-HOUSEKEEPING_S = 5.0  # operator decisions stored by the console are re-read this often
 CONSOLE_START_POLLS, CONSOLE_START_POLL_S = 200, 0.05  # the console must listen within 10 s
 
 
@@ -74,6 +73,7 @@ class System:
         self.centre: CentreService | None = None
         self.caster: Caster | None = None
         self.caster_access = None  # CasterAccessSync: the caster's tables follow the store
+        self.station_sync = None  # StationSync: the network's stations follow the store's registry
         self.bus = None
         self.rbc = None
         self.publisher = LivePublisher()
@@ -98,17 +98,17 @@ class System:
         self._open_store()
         accounts = await self._make_credentials()
         seed = caster_config(self.settings, sc, stations, train_rx, {n: h for n, (_k, _p, h) in accounts.items()})
-        enabled = await self._register_run(stations, seed, accounts)
-        self._make_centre(sc, stations, enabled)
-        port = await self._start_caster(seed, stations, train_rx)
+        records = await self._register_run(stations, seed, accounts)
+        self._make_centre(sc, records)
+        port = await self._start_caster(seed, records)
         await self.centre.start()  # its process starts once the caster's taps are in place
         await self._start_bus()
         await self.caster_access.start()  # from here on the console's changes reach the caster
+        await self.station_sync.start()  # ... and the registry's reach the network
         await self._start_rbc(stations)
-        await self._start_console(stations)
+        await self._start_console(records)
         self._start_trains(sc, train_rx, port)
         self._start_stations(sc, port)  # last: they feed everything above
-        self._tasks.append(asyncio.ensure_future(self._housekeeping()))
         self._write_state(port)
         # what start-up built (the simulated world, the console, modules) lives as long as the run: out of
         # the cyclic garbage collector's sight, whose full passes over it stall the loop (decision 0071)
@@ -137,12 +137,15 @@ class System:
             None, lambda: {name: hash_password(pw) for name, pw in fresh.items()})
         return {name: (k if isinstance(k, str) else None, fresh[name], hashes[name]) for name, k in known.items()}
 
-    async def _register_run(self, stations, seed, accounts) -> dict[str, bool]:
-        """The run's stations into the store, its caster users and mountpoints into an empty store; the
-        password each of the run's own accounts logs in with. Returns each station's enabled flag (an
-        operator's earlier decision stands)."""
+    async def _register_run(self, stations, seed, accounts) -> dict[str, persistence.StationRecord]:
+        """The run's stations, caster users and mountpoints into an empty store; the password each of the
+        run's own accounts logs in with. Returns the store's station registry (the network is built from it:
+        an operator's earlier decisions stand)."""
         fut = self.writer.submit(lambda db: register_run(db, stations, seed, accounts))
-        enabled, passwords = await asyncio.wrap_future(fut) or ({}, {})
+        records, passwords = await asyncio.wrap_future(fut) or ({}, {})
+        if not records:
+            raise RuntimeError("the store registers no reference station: the network has nothing to solve "
+                               "(start on a fresh store, or add a station to this one's registry)")
         for name in accounts:
             if passwords.get(name) is None:
                 log.warning("caster user %s is missing or was changed by an operator: the run's own %s cannot "
@@ -151,24 +154,24 @@ class System:
         use = {name: passwords.get(name) or accounts[name][1] for name in accounts}
         self.credentials = {"station_user": STATION_USER, "station_password": use[STATION_USER],
                             "train_user": TRAIN_USER, "train_password": use[TRAIN_USER]}
-        return enabled
+        return records
 
-    def _make_centre(self, sc: Scenario, stations, enabled: dict[str, bool]) -> None:
-        """The centre service, with the stations an operator disabled left out (its process starts later)."""
-        xyz = {rx.id: tuple(float(x) for x in rx.ecef[0]) for rx in stations}
+    def _make_centre(self, sc: Scenario, records: dict[str, persistence.StationRecord]) -> None:
+        """The centre service on the registry's stations (its process starts later; the disabled ones' data is
+        left out once the caster's taps are set: `_start_caster`)."""
+        xyz = {code: rec.xyz_m for code, rec in records.items()}
         spec = CentreSpec(xyz, self.world.t0, sc.name, area=self.settings.area(), admission=self.settings.admission)
         self.centre = CentreService(spec, asyncio.get_running_loop(), on_epoch=self._on_epoch,
                                     on_outbox=self._on_outbox, on_alarm=self._alarm,
                                     on_written=self._on_vrs_written)
-        for code, on in enabled.items():
-            if not on:
-                self.centre.set_station_enabled(code, False)
 
-    async def _start_caster(self, seed, stations, train_rx) -> int:
+    async def _start_caster(self, seed, records: dict[str, persistence.StationRecord]) -> int:
         """The caster with the store's users and mountpoints (the scenario's `seed` completes their STR
-        records) and the centre as its VRS stream factory, each station's stream tapped into the centre;
-        returns its port. Its tables follow the store from then on (`caster_access.py`)."""
+        records) and the centre as its VRS stream factory, each registered station's stream tapped into the
+        centre; returns its port. Its tables follow the store from then on (`caster_access.py`), and the
+        network's stations the registry (`station_membership.py`)."""
         from augnet.system.caster_access import CasterAccessSync, caster_tables
+        from augnet.system.station_membership import StationSync
 
         described = {m.name: m for m in seed.mounts}
         fut = self.writer.submit(lambda db: caster_tables(db, described))
@@ -177,12 +180,8 @@ class System:
         self.caster.on_alarm = self._alarm  # a bad-password flood is an operator's alarm (issue 19)
         self.caster_access = CasterAccessSync(self.caster, self.sessions, described)
         port = await self.caster.start()
-        for rx in stations:
-            try:
-                self.caster.tap(rx.id, lambda data, code=rx.id: self.centre.feed(code, data))
-            except ValueError:  # the store has no source mountpoint of that name: the centre gets no data
-                log.warning("station %s: no source mountpoint %s in the store; its data does not reach the centre",
-                            rx.id, rx.id)
+        self.station_sync = StationSync(self.centre, self.caster, self.sessions, on_applied=self._on_membership)
+        self.station_sync.adopt(records)
         return port
 
     async def _start_bus(self) -> None:
@@ -190,6 +189,7 @@ class System:
 
         self.bus = await open_bus(self.settings.bus_url or None)
         self.caster_access.bus = self.bus
+        self.station_sync.bus = self.bus
 
     async def _start_rbc(self, stations) -> None:
         """The RSSP-I link to the RBC simulator (a line is needed: its sections are stretches of it)."""
@@ -201,10 +201,10 @@ class System:
         self.rbc = RbcConnection(plan, {rx.id: rx.rtcm_id for rx in stations}, on_alarm=self._alarm)
         await self.rbc.start(self.settings.host)
 
-    async def _start_console(self, stations) -> None:
+    async def _start_console(self, records) -> None:
         """The live state (whenever the console package is installed), then the console serving it."""
         self.publisher.live = make_live_state(
-            self.world, stations, self.station_km,
+            self.world, records,
             caster_snapshot=lambda: self.caster.snapshot(clients=True) if self.caster else {},
             on_station_change=self._on_station_change)
         if self.publisher.live is None or not self.settings.console_port:
@@ -346,29 +346,24 @@ class System:
             self._alarm(*event)
 
     def _on_station_change(self, code: str, fields: dict) -> None:
-        """An operator enabled or disabled a station in the console."""
-        if self.centre is None or "enabled" not in fields:
+        """An operator changed the station registry in this process's console (called on its thread pool):
+        the network follows it at once rather than at the next reconcile."""
+        if self.station_sync is not None:
+            self.station_sync.poke()
+
+    def _on_membership(self, step) -> None:
+        """The network took a registry change: the console's station list follows (a station that joined is
+        down until its data arrives)."""
+        live = self.publisher.live
+        if live is None:
             return
-        self.centre.set_station_enabled(code, bool(fields["enabled"]))
+        if step.action == "remove":
+            live.remove_station(step.code)
+            return
+        if step.action in ("add", "move"):
+            live.update_station(station_live(step.record, self.world))
 
     # --- running ------------------------------------------------------------------------------------------
-
-    async def _housekeeping(self) -> None:
-        """Re-read operator decisions the console stored (a station disabled through the API of another
-        console instance, for example) every `HOUSEKEEPING_S`."""
-        while not self.stop_event.is_set():
-            try:
-                await asyncio.wait_for(self.stop_event.wait(), HOUSEKEEPING_S)
-            except asyncio.TimeoutError:
-                pass
-            fut = self.writer.submit(persistence.station_enabled_map)
-            try:
-                enabled = await asyncio.wrap_future(fut)
-            except Exception:  # noqa: BLE001
-                continue
-            for code, on in (enabled or {}).items():
-                if code in self.centre.stations:
-                    self.centre.set_station_enabled(code, on)
 
     async def run(self, duration_s: float | None = None) -> RunReport:
         loop = asyncio.get_running_loop()
@@ -396,6 +391,8 @@ class System:
             self.console_server.should_exit = True
         if self.rbc is not None:
             await self.rbc.stop()
+        if self.station_sync is not None:  # before the centre: no membership step into a stopped one
+            await self.station_sync.stop()
         if self.centre is not None:
             await self.centre.stop()
         if self.caster_access is not None:

@@ -154,3 +154,48 @@ def test_a_failing_system_hook_does_not_fail_the_committed_change(sqlite_console
     assert r.status_code == 201
     with c.sessions() as s:
         assert q.get_station(s, "STA9").code == "STA9"
+
+
+class _RecordingBus:
+    def __init__(self):
+        self.published = []
+
+    async def publish(self, subject, payload):
+        self.published.append((subject, payload))
+
+
+def test_delete_station_is_admins_audited_told_and_announced(console):
+    """Deleting from the registry takes the station out of the running network (issue 19): the system hook
+    of this process and, on the bus, the centres of others are told."""
+    c = console
+    bus = c.client.app.state.bus = _RecordingBus()
+    with c.sessions.begin() as s:
+        q.add_station(s, "fixture", "STA1", to_ecef_m(30.0, 114.0, 20.0), 101, "STA1")
+    calls = []
+    c.live.on_station_change = lambda code, change: calls.append((code, change))
+    assert c.client.delete("/api/stations/STA1", headers=c.as_("otto")).status_code == 403
+    r = c.client.delete("/api/stations/STA1", headers=c.as_("ada"))
+    assert r.status_code == 204 and r.content == b""
+    assert calls == [("STA1", {"action": "delete"})]
+    assert bus.published == [("augnet.config.stations", b'{"kind":"station","name":"STA1","action":"delete"}')]
+    with c.sessions() as s:
+        assert q.list_stations(s) == []
+        e = q.audit_log(s, 1)[0]
+        assert (e.actor, e.action, e.target) == ("ada", "station.delete", "STA1") and e.detail["rtcm_station_id"] == 101
+    assert c.client.delete("/api/stations/STA1", headers=c.as_("ada")).status_code == 404
+
+
+def test_a_mountpoint_a_station_streams_to_cannot_be_deleted(console):
+    c = console
+    with c.sessions.begin() as s:
+        q.add_station(s, "fixture", "STA1", to_ecef_m(30.0, 114.0, 20.0), 101, "STA1")
+        q.add_mountpoint(s, "fixture", "STA1", "source")
+        q.add_mountpoint(s, "fixture", "SPARE", "source")
+    r = c.client.delete("/api/caster/mountpoints/STA1", headers=c.as_("ada"))
+    assert r.status_code == 409 and "STA1" in r.json()["detail"]
+    assert c.client.delete("/api/caster/mountpoints/SPARE", headers=c.as_("otto")).status_code == 403
+    assert c.client.delete("/api/caster/mountpoints/SPARE", headers=c.as_("ada")).status_code == 204
+    assert c.client.delete("/api/caster/mountpoints/SPARE", headers=c.as_("ada")).status_code == 404
+    with c.sessions() as s:
+        assert [m.name for m in q.list_mountpoints(s)] == ["STA1"]
+        assert q.audit_log(s, 1)[0].action == "mountpoint.delete"

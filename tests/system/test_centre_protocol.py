@@ -22,8 +22,8 @@ from augnet.centre.network import NetworkEpoch
 from augnet.system import centre_protocol as cp
 from augnet.system.centre_protocol import (
     FROM_CENTRE, FROM_LOOP, HEADER_BYTES, LAYOUTS, MAGIC, MAX_BODY_BYTES, PROTOCOL_VERSION, Alive, CentreError,
-    CloseSession, Decoder, EpochsSolved, MoveSession, OpenSession, ProtocolError, Ready, StationData, Stop,
-    VrsGroup, VrsWritten, encode)
+    CloseSession, Decoder, EpochsSolved, MoveSession, OpenSession, ProtocolError, Ready, StationData,
+    StationMembership, Stop, VrsGroup, VrsWritten, encode)
 from tests.system.test_centre_service import _until
 
 T = 1457143239.0
@@ -83,6 +83,8 @@ def one_of_each() -> list:
         OpenSession("VRS/1", 39.9, 116.4, 52.5),
         MoveSession("VRS/1", 39.91, 116.41, 51.0),
         CloseSession("VRS/1"),
+        StationMembership("STA5", (4.8e6, 1.8e5, 4.2e6)),
+        StationMembership("STA5", None),
         VrsWritten(T),
         Stop(),
         Ready(4242),
@@ -142,6 +144,7 @@ ids = st.text(st.characters(blacklist_categories=("Cs",), blacklist_characters="
     st.builds(OpenSession, texts, floats, floats, floats),
     st.builds(MoveSession, texts, floats, floats, floats),
     st.builds(CloseSession, texts),
+    st.builds(StationMembership, texts, st.none() | st.tuples(floats, floats, floats)),
     st.builds(VrsWritten, floats),
     st.builds(Ready, st.integers(-2**63, 2**63 - 1)),
     st.builds(lambda t, pairs, *rest: VrsGroup(t, [c for c, _ in pairs], [b for _, b in pairs], *rest),

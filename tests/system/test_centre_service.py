@@ -240,3 +240,41 @@ def test_delivering_lasts_from_an_epochs_first_vrs_group_to_its_last(recorded):
         assert not svc.delivering()
 
     asyncio.run(main())
+
+
+def test_stations_join_move_and_leave_the_running_centre_and_a_restart_keeps_them(recorded):
+    """The registry's changes (`station_membership.py`) reach the centre process; a bad one is refused on the
+    loop side (ValueError, nothing sent); a replaced centre is built with the stations as they are now."""
+    world, streams, stations = recorded
+    names = sorted(stations)
+    leaving = names[-1]
+
+    async def main():
+        svc, epochs, alarms = _service(world, stations)
+        await svc.start()
+        await _feed(svc, streams, stations, range(0, 3), 0.05)
+        await _until(lambda: len(epochs) >= 2 and leaving in epochs[-1].network.stations)
+        with pytest.raises(ValueError, match="already"):
+            svc.add_station(names[0], stations[names[0]])
+        with pytest.raises(ValueError, match="surface"):
+            svc.move_station(names[0], (1.0, 2.0, 3.0))
+        svc.remove_station(leaving)
+        assert leaving not in svc.stations
+        await _feed(svc, streams, stations, range(3, 6), 0.05)  # its bytes are no longer read
+        await _until(lambda: len(epochs) >= 5 and leaving not in epochs[-1].network.stations)
+        assert all(leaving not in b for b in epochs[-1].network.baselines)
+        assert svc.errors == 0
+        first = svc._proc
+        first.kill()  # the replacement is built without the station that left
+        await _until(lambda: svc.alive and svc._proc is not first)
+        n = len(epochs)
+        await _feed(svc, streams, stations, range(0, 4), 0.05)  # a fresh centre: the navigation data again
+        await _until(lambda: len(epochs) >= n + 2)
+        assert leaving not in epochs[-1].network.stations
+        svc.add_station(leaving, stations[leaving])  # and it joins again
+        await _feed(svc, streams, stations, range(4, EPOCHS), 0.05)
+        await _until(lambda: leaving in epochs[-1].network.stations)
+        assert svc.errors == 1  # the killed centre only
+        await svc.stop()
+
+    asyncio.run(main())

@@ -68,7 +68,38 @@ def test_a_new_station_is_registered_enabled_and_an_operators_decision_stands(tm
         queries.update_station(s, "op", "STA1", enabled=False)
     with sessions.begin() as s:
         assert persistence.register_station(s, "STA1", "STA1", xyz, 101, "STA1") is False
-        assert persistence.station_enabled_map(s) == {"STA1": False}
+        assert persistence.station_records(s)["STA1"].enabled is False
+
+
+def test_the_scenario_seeds_only_an_empty_station_table(tmp_path):
+    """A station an operator deleted does not come back with the next run's scenario (issue 19)."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from augnet.store import queries
+    from augnet.store.db import open_store
+    from augnet.system import persistence
+    from augnet.system.run_config import register_run
+    from ntrip_caster.config import CasterConfig
+
+    sessions = open_store(f"sqlite:///{tmp_path / 'augnet.db'}")
+    rx = [SimpleNamespace(id=f"STA{k}", ecef=np.array([[4.8e6 + 1e4 * k, 1.7e5, 4.2e6]]), rtcm_id=100 + k)
+          for k in (1, 2)]
+    cfg = CasterConfig(users={}, mounts=())
+    with sessions.begin() as s:
+        records, _ = register_run(s, rx, cfg, {})
+    assert sorted(records) == ["STA1", "STA2"] and records["STA2"].xyz_m == (4.82e6, 1.7e5, 4.2e6)
+    with sessions.begin() as s:
+        queries.delete_station(s, "admin", "STA2")
+    with sessions.begin() as s:
+        records, _ = register_run(s, rx, cfg, {})
+    assert sorted(records) == ["STA1"]
+    with sessions.begin() as s:
+        queries.delete_station(s, "admin", "STA1")
+    with sessions.begin() as s:
+        records, _ = register_run(s, rx, cfg, {})
+    assert records == {}  # an operator emptied the registry: the scenario does not refill it
 
 
 def test_load_test_trains_report_their_positions_spread_over_the_interval():

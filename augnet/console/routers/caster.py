@@ -202,6 +202,17 @@ async def edit_user(name: Key, body: CasterUserPatch, who: Admin, live: Live, re
     return _user_out(u, _client_counts(live))
 
 
+@router.delete("/mountpoints/{name}", status_code=status.HTTP_204_NO_CONTENT,
+               responses={404: {"description": "no such mountpoint"},
+                          409: {"description": "a registered station streams to it"}})
+async def delete_mountpoint(name: Key, who: Admin, live: Live, request: Request) -> Response:
+    """The mountpoint leaves the store and the sourcetable; its readers are closed (admin)."""
+    await run_in_threadpool(_write, request.app.state.sessions, q.delete_mountpoint, who.name, name)
+    _tell_system(live, "mountpoint", name, {"action": "delete"})
+    await _announce(request, "mountpoint", name, "delete")
+    return Response(status_code=status.HTTP_204_NO_CONTENT)
+
+
 @router.delete("/users/{name}", status_code=status.HTTP_204_NO_CONTENT,
                responses={404: {"description": "no such user"}})
 async def delete_user(name: Key, who: Admin, live: Live, request: Request) -> Response:

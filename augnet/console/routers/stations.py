@@ -1,15 +1,19 @@
 """Reference stations: the store's registry merged with what the running system reports.
 
-Admins add and edit stations; operators enable and disable them. Every change is audited (in the store's
-transaction) and handed to the running system through LiveState.station_changed.
+Admins add, edit and delete stations; operators enable and disable them. Every change is audited (in the
+store's transaction), handed to the running system of this process through LiveState.station_changed, and
+announced on the bus (`augnet.bus.config_events`) for the centres of other processes: the running network
+follows the registry (`augnet.system.station_membership`, decision 0240).
 """
 
 from __future__ import annotations
 
 import logging
 
-from fastapi import APIRouter, status
+import anyio.from_thread
+from fastapi import APIRouter, Request, Response, status
 
+from augnet.bus.config_events import CasterChange, publish_change
 from augnet.console import geo
 from augnet.console.deps import Admin, DB, Key, Live, OperatorRole, Viewer, field_error
 from augnet.console.live import LiveState, StationLive
@@ -50,12 +54,20 @@ def _check_rtcm_id(session, live: LiveState, code: str, rtcm_id: int) -> None:
         raise field_error("rtcm_station_id", f"RTCM station id {rtcm_id} is already used by station {taken[0]}")
 
 
-def _tell_system(live: LiveState, code: str, change: dict) -> None:
-    """The change is committed; a failing system hook must not turn it into an error for the operator."""
+def _tell_system(live: LiveState, code: str, change: dict, request: Request | None = None) -> None:
+    """The change is committed; a failing system hook or bus must not turn it into an error for the operator
+    (the centres' periodic reconcile picks the change up)."""
     try:
         live.station_changed(code, change)
     except Exception:  # the hook belongs to the running system; log it, keep serving
         log.exception("station change hook failed for %s", code)
+    bus = request.app.state.bus if request is not None else None
+    if bus is None:
+        return
+    try:  # these routes run on the thread pool: the bus lives on the app's event loop
+        anyio.from_thread.run(publish_change, bus, CasterChange("station", code, str(change.get("action", "edit"))))
+    except Exception:  # noqa: BLE001
+        log.warning("station change of %s not announced on the bus", code, exc_info=True)
 
 
 @router.get("", response_model=list[StationOut])
@@ -81,19 +93,20 @@ def get_station(code: Key, who: Viewer, session: DB, live: Live) -> StationOut:
 
 @router.post("", response_model=StationOut, status_code=status.HTTP_201_CREATED,
              responses={409: {"description": "code taken"}})
-def add_station(body: StationIn, who: Admin, session: DB, live: Live) -> StationOut:
+def add_station(body: StationIn, who: Admin, session: DB, live: Live, request: Request) -> StationOut:
     _check_rtcm_id(session, live, body.code, body.rtcm_station_id)
     xyz = geo.to_ecef_m(body.lat_deg, body.lon_deg, body.h_m)
     st = q.add_station(session, who.name, body.code, xyz, body.rtcm_station_id, body.mountpoint, body.name)
     session.commit()
     _tell_system(live, st.code, {"action": "add", "enabled": True, "lat_deg": body.lat_deg, "lon_deg": body.lon_deg,
                                  "h_m": body.h_m, "rtcm_station_id": body.rtcm_station_id,
-                                 "mountpoint": body.mountpoint, "name": body.name})
+                                 "mountpoint": body.mountpoint, "name": body.name}, request)
     return _out(st, live.stations.get(st.code), live)
 
 
 @router.patch("/{code}", response_model=StationOut, responses=NOT_FOUND)
-def edit_station(code: Key, body: StationPatch, who: Admin, session: DB, live: Live) -> StationOut:
+def edit_station(code: Key, body: StationPatch, who: Admin, session: DB, live: Live,
+                 request: Request) -> StationOut:
     """Change any of name, position (any of lat/lon/h; the others are kept), RTCM id, mountpoint, enabled."""
     given = body.model_dump(exclude_unset=True)
     if not given:
@@ -111,25 +124,34 @@ def edit_station(code: Key, body: StationPatch, who: Admin, session: DB, live: L
         changes.update(x_m=x, y_m=y, z_m=z)
     st = q.update_station(session, who.name, code, **changes)
     session.commit()
-    _tell_system(live, code, {"action": "edit", **given})
+    _tell_system(live, code, {"action": "edit", **given}, request)
     return _out(st, live.stations.get(code), live)
 
 
-def _set_enabled(code: str, enabled: bool, who, session, live: LiveState) -> StationOut:
+@router.delete("/{code}", status_code=status.HTTP_204_NO_CONTENT, responses=NOT_FOUND)
+def delete_station(code: Key, who: Admin, session: DB, live: Live, request: Request) -> Response:
+    """The station leaves the registry and the running network (admin); its mountpoint stays."""
+    q.delete_station(session, who.name, code)
+    session.commit()
+    _tell_system(live, code, {"action": "delete"}, request)
+    return Response(status_code=status.HTTP_204_NO_CONTENT)
+
+
+def _set_enabled(code: str, enabled: bool, who, session, live: LiveState, request: Request) -> StationOut:
     st = q.get_station(session, code)
     if st.enabled != enabled:
         st = q.update_station(session, who.name, code, enabled=enabled)
         session.commit()
-        _tell_system(live, code, {"action": "enable" if enabled else "disable", "enabled": enabled})
+        _tell_system(live, code, {"action": "enable" if enabled else "disable", "enabled": enabled}, request)
     return _out(st, live.stations.get(code), live)
 
 
 @router.post("/{code}/disable", response_model=StationOut, responses=NOT_FOUND)
-def disable_station(code: Key, who: OperatorRole, session: DB, live: Live) -> StationOut:
+def disable_station(code: Key, who: OperatorRole, session: DB, live: Live, request: Request) -> StationOut:
     """Take a station out of the network solution (operator or admin)."""
-    return _set_enabled(code, False, who, session, live)
+    return _set_enabled(code, False, who, session, live, request)
 
 
 @router.post("/{code}/enable", response_model=StationOut, responses=NOT_FOUND)
-def enable_station(code: Key, who: OperatorRole, session: DB, live: Live) -> StationOut:
-    return _set_enabled(code, True, who, session, live)
+def enable_station(code: Key, who: OperatorRole, session: DB, live: Live, request: Request) -> StationOut:
+    return _set_enabled(code, True, who, session, live, request)
