@@ -66,6 +66,7 @@ from augnet.centre.observations import StationEpoch, from_obsdata
 from augnet.centre.station_check import CheckResult, StationCheck
 from augnet.centre.vrs import geometry_many, synthesize
 from augnet.centre.vrs_admission import AdmissionConfig, AdmissionPolicy, fixed_somewhere
+from augnet.centre.vrs_modes import ModeTally, select_modes, single_base_sigma_m
 from augnet.gnss.antex import NULL_ANTENNA, AntexError, ReceiverAntenna, antennas_for, read_antex
 from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
 from augnet.gnss.ephemeris import NavigationData
@@ -419,6 +420,8 @@ class VrsResult:
     # per written epoch: the satellites the network had corrections for around the point, carried or not
     corrected_sets: list[frozenset] = field(default_factory=list)
     admission_moments: int = 0  # epochs at which waiting satellites entered, every satellite restarted
+    # per written epoch's satellites: what the VRS carries and the centre's 1-sigma (vrs_modes.py)
+    mode_tally: ModeTally = field(default_factory=ModeTally)
 
     @property
     def antennas_modelled(self) -> list[str]:
@@ -513,6 +516,7 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
     restarts = 0
     skipped = 0
     misclosures = 0
+    tally = ModeTally()
     check = StationCheck(stations, {s.name: (s.name_a, s.name_b) for s in net.solvers.values()}, inp.nav)
     checked: CheckResult | None = None
     for e, t in enumerate(times):
@@ -593,6 +597,12 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
             continue
         restarts += decision.restart
         prev_master, prev_corrected = vmaster, corrected
+        # what each carried satellite is (no float model here: decision 0230) and the single-base error it has
+        level = float(np.median([s_.ionosphere.level_ppm for s_ in net.solvers.values()])) if net.solvers else 0.0
+        d_master = float(np.linalg.norm(stations[vmaster] - point[0]))
+        sat_corr = np.isin(ep.sats, list(corrected))[None]
+        sat_modes, sat_sigma = select_modes(sat_corr, single_base_sigma_m([d_master], level))
+        tally.add(sat_modes[0], sat_sigma[0])
         masters[vmaster] += 1
         epochs.append(ep)
         modes.append(mode)
@@ -604,7 +614,7 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
                      times_processed=len(times), skipped_epochs=skipped, baselines=summaries,
                      misclosures=misclosures, seconds_wall=time.perf_counter() - t_wall,
                      station_check=checked if checked is not None else _judge_stations(check),
-                     corrected_sets=corrected_sets, admission_moments=restarts)
+                     corrected_sets=corrected_sets, admission_moments=restarts, mode_tally=tally)
 
 
 def _judge_stations(check: StationCheck) -> CheckResult:
@@ -760,6 +770,7 @@ def summary_lines(result: VrsResult) -> list[str]:
         lines.append(f"admission moments (waiting satellites entered, every satellite restarted): "
                      f"{result.admission_moments}; corrected satellite-epochs not carried (waiting, or a system "
                      f"too thin): {waited}")
+    lines.extend(result.mode_tally.lines())
     lines.append(f"VRS master station(s): " + ", ".join(f"{m} ({k} epochs)" for m, k in result.vrs_masters.most_common()))
     lines.append(f"processing time {result.seconds_wall:.1f} s")
     return lines
