@@ -422,6 +422,7 @@ class VrsResult:
     admission_moments: int = 0  # epochs at which waiting satellites entered, every satellite restarted
     # per written epoch's satellites: what the VRS carries and the centre's 1-sigma (vrs_modes.py)
     mode_tally: ModeTally = field(default_factory=ModeTally)
+    epoch_sigma_m: list[float] = field(default_factory=list)  # per written epoch: its largest centre 1-sigma
 
     @property
     def antennas_modelled(self) -> list[str]:
@@ -517,6 +518,7 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
     skipped = 0
     misclosures = 0
     tally = ModeTally()
+    epoch_sigma: list[float] = []
     check = StationCheck(stations, {s.name: (s.name_a, s.name_b) for s in net.solvers.values()}, inp.nav)
     checked: CheckResult | None = None
     for e, t in enumerate(times):
@@ -603,6 +605,7 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
         sat_corr = np.isin(ep.sats, list(corrected))[None]
         sat_modes, sat_sigma = select_modes(sat_corr, single_base_sigma_m([d_master], level))
         tally.add(sat_modes[0], sat_sigma[0])
+        epoch_sigma.append(float(np.max(sat_sigma[0])) if np.isfinite(sat_sigma[0]).all() else float("nan"))
         masters[vmaster] += 1
         epochs.append(ep)
         modes.append(mode)
@@ -614,7 +617,8 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
                      times_processed=len(times), skipped_epochs=skipped, baselines=summaries,
                      misclosures=misclosures, seconds_wall=time.perf_counter() - t_wall,
                      station_check=checked if checked is not None else _judge_stations(check),
-                     corrected_sets=corrected_sets, admission_moments=restarts, mode_tally=tally)
+                     corrected_sets=corrected_sets, admission_moments=restarts, mode_tally=tally,
+                     epoch_sigma_m=epoch_sigma)
 
 
 def _judge_stations(check: StationCheck) -> CheckResult:

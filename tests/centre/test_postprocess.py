@@ -315,3 +315,18 @@ def test_recording_before_any_fix_is_single_base_whatever_the_master(tmp_path):
         assert "no baseline fixed: corrections are single-base geometric shifts only" in "\n".join(summary_lines(res))
     for ep, mode in zip(res.epochs, res.epoch_mode):  # single-base: the master's sky; network: the corrected
         assert len(ep.sats) >= (20 if mode == "single-base" else MIN_NETWORK_DD + 1)
+    # what each epoch carries, counted truthfully: network satellites are the corrected ones, the rest of the
+    # written satellite-epochs single-base with a finite error; no float model by default (decision 0230)
+    from augnet.centre.vrs_modes import FLOAT_MODEL, NETWORK, SINGLE_BASE
+
+    tally = res.mode_tally
+    modes = np.array(res.epoch_mode)
+    assert tally.counts[NETWORK] == sum(res.corrected_sats)
+    assert tally.counts[SINGLE_BASE] == sum(len(ep.sats) for ep, m in zip(res.epochs, modes) if m == "single-base")
+    assert tally.counts[FLOAT_MODEL] == 0
+    sig = np.array(res.epoch_sigma_m)
+    assert len(sig) == len(res.epochs)
+    assert np.all(np.isfinite(sig[modes == "single-base"]) & (sig[modes == "single-base"] > 0))
+    assert np.all(np.isnan(sig[modes == "network"]))  # the network's sigma is not estimated: not invented
+    summary = "\n".join(summary_lines(res))
+    assert f"VRS carries single-base: {tally.counts[SINGLE_BASE]} satellite-epochs" in summary
