@@ -155,3 +155,20 @@ def test_campaign_smoke_crossover_and_loop_no_wrong_decision(topo):
     assert t["switches"] == 2 and t["switches_correct"] == 2
     assert t["decided"] >= 0.9 * t["epochs"]
     assert any("x12+" in r.route for r in rep.runs) and any("l3b-" in r.route for r in rep.runs)
+
+
+def test_cli_campaign_prints_the_report_and_refuses_a_bad_line(tmp_path):
+    from typer.testing import CliRunner
+
+    from augnet.cli import _mount, app
+
+    _mount()
+    out = tmp_path / "totals.json"
+    r = CliRunner().invoke(app, ["track", "campaign", "--line", str(LINE), "--runs", "1", "--json", str(out)])
+    assert r.exit_code == 0, r.output
+    assert "wrong 0" in r.output and "facing switches passed" in r.output
+    assert '"epochs"' in out.read_text()
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"format": "something else"}')
+    r = CliRunner().invoke(app, ["track", "campaign", "--line", str(bad)])
+    assert r.exit_code == 2 and "format" in r.output
