@@ -110,14 +110,17 @@ class FacingSwitch:
     s_frog_m: float  # route distance of the frog on the leg taken
 
 
-def facing_switches(topology: Topology, plan: RoutePlan) -> list[FacingSwitch]:
+def facing_switches(topology: Topology, plan: RoutePlan, facing: bool = True) -> list[FacingSwitch]:
+    """Switches the route passes from the toe (facing: a choice of leg), or with `facing` False the
+    trailing ones (from a leg to the toe: no choice; `s_frog_m` is then the frog on the leg left)."""
     out, s = [], 0.0
     for a, b, la in zip(plan.steps, plan.steps[1:], plan.lengths_m):
         s += la
         node = topology.node_ahead(a)
-        if topology.nodes[node].kind == "switch" and topology.turnouts[node].toe == a.edge:
+        if topology.nodes[node].kind == "switch" and (topology.turnouts[node].toe == a.edge) == facing:
             t = topology.turnouts[node]
-            out.append(FacingSwitch(node, b.edge, topology.edges[b.edge].track, s, s + t.frog_m))
+            frog = s + t.frog_m if facing else s - t.frog_m
+            out.append(FacingSwitch(node, b.edge, topology.edges[b.edge].track, s, frog))
     return out
 
 
@@ -135,6 +138,8 @@ class RunResult:
     fixed: int = 0
     switches: int = 0
     switches_correct: int = 0
+    trailing: int = 0
+    trailing_correct: int = 0
     after_frog_m: list[float] = field(default_factory=list)  # decision distance after the frog (< 0: before)
     wrong_details: list[str] = field(default_factory=list)
 
@@ -224,20 +229,30 @@ def run_one(topology: Topology, seed: int, start: Step | None = None) -> RunResu
         else:
             res.no_fix += 1
         decisions.append((s, d.track if d.status == "decided" else None, truth_track))
-    # per facing switch: the first decision past the switch node, before the next facing switch
-    for j, sw in enumerate(switches):
+    # per switch: the first decision past the switch node, before the next switch, is the truth's track
+    trailing = facing_switches(topology, plan, facing=False)
+    nodes = sorted(x.s_node_m for x in switches + trailing)  # facing_switches lists in route order
+    for sw in switches + trailing:
         if not (END_CLEARANCE_M < sw.s_node_m < s_end):
             continue
-        res.switches += 1
-        s_next = switches[j + 1].s_node_m if j + 1 < len(switches) else math.inf
+        is_facing = sw in switches
+        res.switches += is_facing
+        res.trailing += not is_facing
+        # a facing switch's leg is told until the next choice (deciding track 2 after the crossover's
+        # trailing end still says which leg was taken); a trailing one's until the next switch
+        later = [x.s_node_m for x in switches] if is_facing else nodes
+        s_next = next((x for x in later if x > sw.s_node_m), math.inf)
         for s, track, truth in decisions:
             if s <= sw.s_node_m or track is None:
                 continue
             if s >= s_next:
                 break
             if track == truth:
-                res.switches_correct += 1
-                res.after_frog_m.append(s - sw.s_frog_m)
+                if is_facing:
+                    res.switches_correct += 1
+                    res.after_frog_m.append(s - sw.s_frog_m)
+                else:
+                    res.trailing_correct += 1
             break
     return res
 
@@ -258,6 +273,7 @@ class CampaignReport:
             "not_decided_pct": 100.0 * (epochs - sum(x.decided for x in r)) / max(epochs, 1),
             "fixed_pct": 100.0 * sum(x.fixed for x in r) / max(epochs, 1),
             "switches": sum(x.switches for x in r), "switches_correct": sum(x.switches_correct for x in r),
+            "trailing": sum(x.trailing for x in r), "trailing_correct": sum(x.trailing_correct for x in r),
             "after_frog_median_m": float(np.median(d)) if len(d) else math.nan,
             "after_frog_p95_m": float(np.percentile(d, 95)) if len(d) else math.nan,
             "after_frog_max_m": float(np.max(d)) if len(d) else math.nan,
@@ -276,7 +292,8 @@ class CampaignReport:
             f"runs {t['runs']}, epochs {t['epochs']}, decided {t['decided']}, wrong {t['wrong']}, "
             f"unknown {t['unknown']} ({t['unknown_pct']:.1f} %), inconsistent {t['inconsistent']}, "
             f"no fix {t['no_fix']} (not decided {t['not_decided_pct']:.1f} %), fixed {t['fixed_pct']:.1f} % of epochs")
-        lines.append(f"facing switches passed {t['switches']}, decided correctly {t['switches_correct']}; "
+        lines.append(f"facing switches passed {t['switches']}, decided correctly {t['switches_correct']} "
+                     f"(trailing {t['trailing']}, {t['trailing_correct']}); "
                      f"decision after the frog: median {t['after_frog_median_m']:.1f} m, "
                      f"p95 {t['after_frog_p95_m']:.1f} m, max {t['after_frog_max_m']:.1f} m (negative: before it)")
         return "\n".join(lines)
