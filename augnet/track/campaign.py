@@ -35,6 +35,8 @@ SIGMA_UP_FACTOR = 2.0  # vertical sigma / horizontal sigma (GNSS geometry, typic
 # Error correlation times [s] (assumed: multipath and residual atmosphere on a moving antenna).
 TAU_FIXED_S = 20.0
 TAU_FLOAT_S = 30.0
+# Stress (off by default): share of fixed spells that are wrong fixes carrying a cross-track bias.
+WRONG_FIX_FRACTION = 0.2
 # Train speed [m/s] drawn per run (36-108 km/h: station and crossover speeds).
 SPEED_RANGE_M_S = (10.0, 30.0)
 # A run starts and ends this far [m] from the route's end nodes.
@@ -147,8 +149,15 @@ class RunResult:
 class SolutionErrorModel:
     """Fixed/float/none Markov chain with AR(1) horizontal and vertical errors (module constants)."""
 
-    def __init__(self, rng: np.random.Generator):
+    def __init__(self, rng: np.random.Generator, error_scale: float = 1.0, wrong_fix_bias_m: float = 0.0):
+        """`error_scale`: true error / reported sigma (stress: a covariance that understates);
+        `wrong_fix_bias_m`: cross-track bias of a wrong fix (WRONG_FIX_FRACTION of fixed spells)."""
+        if not (error_scale > 0.0 and math.isfinite(error_scale) and math.isfinite(wrong_fix_bias_m)):
+            raise ValueError("error scale must be positive and finite, the wrong-fix bias finite")
         self.rng = rng
+        self.error_scale = float(error_scale)
+        self.wrong_fix_bias_m = float(wrong_fix_bias_m)
+        self.bias_cross_m = 0.0  # the current spell's cross-track bias
         self.state = "float"  # a run starts on a float solution, like a receiver coming up
         self.sigma = rng.uniform(*SIGMA_FLOAT_RANGE_M)
         self.err = rng.normal(0.0, 1.0, 3) * self._sig3()
@@ -157,7 +166,8 @@ class SolutionErrorModel:
         return np.array([self.sigma, self.sigma, SIGMA_UP_FACTOR * self.sigma])
 
     def step(self) -> tuple[str, np.ndarray | None, np.ndarray]:
-        """Advance one epoch: (state, ENU error [m] or None in an outage, reported ENU sigmas [m])."""
+        """Advance one epoch: (state, ENU error [m] or None in an outage, reported ENU sigmas [m]);
+        the spell's cross-track bias is in `bias_cross_m` (to the left of the direction of travel)."""
         u = self.rng.random()
         prev = self.state
         if self.state == "none":
@@ -178,13 +188,17 @@ class SolutionErrorModel:
             # a new solution state: the error restarts from its own stationary distribution
             self.sigma = new_sigma
             self.err = self.rng.normal(0.0, 1.0, 3) * self._sig3()
+            self.bias_cross_m = 0.0
+            if self.wrong_fix_bias_m and self.state == "fixed" and self.rng.random() < WRONG_FIX_FRACTION:
+                self.bias_cross_m = self.wrong_fix_bias_m * (1.0 if self.rng.random() < 0.5 else -1.0)
         else:
             rho = math.exp(-EPOCH_S / tau)
             self.err = rho * self.err + math.sqrt(1.0 - rho * rho) * self.rng.normal(0.0, 1.0, 3) * self._sig3()
-        return self.state, self.err.copy(), self._sig3()
+        return self.state, self.err * self.error_scale, self._sig3()
 
 
-def run_one(topology: Topology, seed: int, start: Step | None = None) -> RunResult:
+def run_one(topology: Topology, seed: int, start: Step | None = None, error_scale: float = 1.0,
+            wrong_fix_bias_m: float = 0.0) -> RunResult:
     rng = np.random.default_rng(seed)
     starts = route_starts(topology)
     start = start or starts[seed % len(starts)]
@@ -194,7 +208,7 @@ def run_one(topology: Topology, seed: int, start: Step | None = None) -> RunResu
     speed = float(rng.uniform(*SPEED_RANGE_M_S))
     res = RunResult(seed, [f"{s.edge}{'+' if s.direction == 'up' else '-'}" for s in plan.steps], speed)
     switches = facing_switches(topology, plan)
-    errors = SolutionErrorModel(rng)
+    errors = SolutionErrorModel(rng, error_scale, wrong_fix_bias_m)
     ident = TrackIdentifier(topology)
     s_end = plan.length_m - END_CLEARANCE_M
     n = int((s_end - END_CLEARANCE_M) / (speed * EPOCH_S)) + 1
@@ -214,6 +228,12 @@ def run_one(topology: Topology, seed: int, start: Step | None = None) -> RunResu
             llh = ecef_to_geodetic(x)
             r = enu_rotation(llh[0], llh[1])
             cov = r.T @ np.diag(sig ** 2) @ r
+            if errors.bias_cross_m:
+                ahead = topology.point_at_m(truth_edge, min(along + 1.0, plan.lengths_m[i]))
+                behind = topology.point_at_m(truth_edge, max(along - 1.0, 0.0))
+                tan = (r @ (ahead - behind))[:2] * (1.0 if plan.steps[i].direction == "up" else -1.0)
+                tan /= np.linalg.norm(tan)
+                err = err + errors.bias_cross_m * np.array([-tan[1], tan[0], 0.0])
             d = ident.update(fix_from_position(t, x + r.T @ err, cov))
             res.fixed += state == "fixed"
         if d.status == "decided":
@@ -299,5 +319,7 @@ class CampaignReport:
         return "\n".join(lines)
 
 
-def run_campaign(topology: Topology, seeds=DEFAULT_SEEDS) -> CampaignReport:
-    return CampaignReport([run_one(topology, int(s)) for s in seeds])
+def run_campaign(topology: Topology, seeds=DEFAULT_SEEDS, error_scale: float = 1.0,
+                 wrong_fix_bias_m: float = 0.0) -> CampaignReport:
+    return CampaignReport([run_one(topology, int(s), error_scale=error_scale, wrong_fix_bias_m=wrong_fix_bias_m)
+                           for s in seeds])

@@ -22,7 +22,11 @@ def _load(path: Path):
 @app.command("campaign")
 def campaign(line: Path = typer.Option(..., "--line", help="railML 2.x file or augnet-topology/1 JSON"),
              runs: int = typer.Option(16, "--runs", min=1, help="seeded runs (seeds 0..N-1)"),
-             json_out: Path = typer.Option(None, "--json", help="also write the totals as JSON here")) -> None:
+             json_out: Path = typer.Option(None, "--json", help="also write the totals as JSON here"),
+             error_scale: float = typer.Option(1.0, "--error-scale", help="stress: true error / reported sigma"),
+             wrong_fix_bias: float = typer.Option(0.0, "--wrong-fix-bias",
+                                                  help="stress: cross-track bias [m] of wrong fixes "
+                                                       "(1 fixed spell in 5)")) -> None:
     """Seeded train runs through the line's switches with simulated solution errors; prints the report."""
     from augnet.track.campaign import run_campaign
 
@@ -31,7 +35,11 @@ def campaign(line: Path = typer.Option(..., "--line", help="railML 2.x file or a
     except (OSError, TopologyError) as exc:
         typer.echo(f"cannot use line {line}: {exc}", err=True)
         raise typer.Exit(2)
-    rep = run_campaign(topo, range(runs))
+    try:
+        rep = run_campaign(topo, range(runs), error_scale=error_scale, wrong_fix_bias_m=wrong_fix_bias)
+    except ValueError as exc:
+        typer.echo(f"cannot run the campaign: {exc}", err=True)
+        raise typer.Exit(2)
     typer.echo(rep.text())
     if json_out is not None:
         json_out.write_text(json.dumps(rep.totals(), indent=1))

@@ -172,3 +172,21 @@ def test_cli_campaign_prints_the_report_and_refuses_a_bad_line(tmp_path):
     bad.write_text('{"format": "something else"}')
     r = CliRunner().invoke(app, ["track", "campaign", "--line", str(bad)])
     assert r.exit_code == 2 and "format" in r.output
+
+
+@pytest.mark.parametrize("scale", [1.0, 2.0])
+def test_campaign_error_model_reports_its_sigma_honestly_unless_stressed(scale):
+    from augnet.track.campaign import SolutionErrorModel
+
+    m = SolutionErrorModel(np.random.default_rng(7), error_scale=scale)
+    z, states = [], []
+    for _ in range(20000):
+        st, err, sig = m.step()
+        states.append(st)
+        if err is not None:
+            z.append(err[:2] / sig[:2])
+    z = np.array(z)
+    assert np.std(z) == pytest.approx(scale, rel=0.15)  # AR(1), ~400 independent samples
+    assert 0.6 < states.count("fixed") / len(states) < 0.9  # the stated fixed/float mixture
+    with pytest.raises(ValueError):
+        SolutionErrorModel(np.random.default_rng(0), error_scale=0.0)
