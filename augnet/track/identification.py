@@ -32,7 +32,7 @@ import numpy as np
 
 from augnet.gnss.geometry import ecef_to_geodetic, enu_rotation
 from augnet.onboard.integrity_allocation import DEFAULT_ALLOCATION, IntegrityAllocation
-from augnet.track.topology import Step, Topology, TopologyError
+from augnet.track.topology import Step, Topology
 
 # Highest line speed [m/s] a train may move between two fixes: 360 km/h (CTCS-3 lines run 350 km/h).
 MAX_SPEED_M_S = 100.0
@@ -237,4 +237,4 @@ def _logsumexp(a: np.ndarray) -> float:
 
 
 __all__ = ["TrackIdentifier", "TrackFix", "TrackDecision", "fix_from_solution", "fix_from_position",
-           "topology_transitions", "TopologyError"]
+           "topology_transitions"]
