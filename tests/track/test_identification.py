@@ -147,6 +147,15 @@ def test_fix_from_solution_and_bad_input(topo):
     assert ident.update(None, 4.0).status == "no fix"
 
 
+def test_an_onboard_rtk_solution_is_a_fix_the_identifier_decides_on(topo):
+    from augnet.onboard.rtk import RtkSolution, Status
+
+    x = topo.point_at_m("t2b", 1000.0)
+    sol = RtkSolution(time=10.0, status=Status.FIX, position_m=x, covariance_m2=np.eye(3) * FIXED_SIGMA_M ** 2)
+    d = TrackIdentifier(topo).update(fix_from_solution(sol))
+    assert d.status == "decided" and d.track == "2" and d.edge == "t2b"
+
+
 def test_campaign_smoke_crossover_and_loop_no_wrong_decision(topo):
     # seed 4: track 1 over the crossover to track 2 (up); seed 5: down track 1 through loop 3
     rep = run_campaign(topo, seeds=(4, 5))
