@@ -29,6 +29,7 @@ SUBAPPS = (
     ("centre", "augnet.centre.cli", "app", "The network engine (control centre)."),
     ("console", "augnet.console.cli", "app", "The operator console."),
     ("scenario", "augnet.scenario.cli", "app", "Run a scenario end to end, faster than real time: report.json + plots."),
+    ("track", "augnet.track.cli", "app", "Track topology and track identification (campaign through switches)."),
     ("up", "augnet.system.cli", "up", "The whole system in one process: stations, caster, centre, RSSP-I, trains, console."),
 )
 

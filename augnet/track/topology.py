@@ -252,8 +252,15 @@ class Topology:
         return float(np.interp(along_m, self._arc[edge], e.km))
 
     def position_ecef(self, edge: str, km: float) -> np.ndarray:
-        s = self.along_m(edge, km)
+        return self.point_at_m(edge, self.along_m(edge, km))
+
+    def point_at_m(self, edge: str, along_m: float) -> np.ndarray:
+        """ECEF position [m] at arc length `along_m` from the edge's begin node (on its chords)."""
+        self._edge(edge)
+        s = float(along_m)
         x, arc = self._ecef[edge], self._arc[edge]
+        if not (math.isfinite(s) and -MIN_SEGMENT_M <= s <= arc[-1] + MIN_SEGMENT_M):
+            raise TopologyError(f"edge {edge}", f"{along_m} m is outside the edge (0-{arc[-1]:.3f} m)")
         i = int(np.clip(np.searchsorted(arc, s, side="right") - 1, 0, len(arc) - 2))
         f = (s - arc[i]) / (arc[i + 1] - arc[i])
         return x[i] + f * (x[i + 1] - x[i])
