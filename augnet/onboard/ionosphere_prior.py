@@ -124,6 +124,8 @@ class LearnedPrior:
 # per satellite over RATE_WINDOW_S [s] of an unbroken arc, against the highest satellite, vertical (over
 # sqrt(M_k^2 + M_ref^2)).  A 1 Hz rover's GF multipath (mm, minutes) sets the window: longer averages it down.
 RATE_WINDOW_S = 120.0
+# ... and the shortest span [s] whose least-squares slope is used before a first full window (a cold start).
+RATE_MIN_S = 30.0
 # The tight prior tried when the rate says the night is quiet [m]: the vertical SD ionosphere of fixed
 # satellites at 20 km on catnet-2010-077 was 0.3-1.0 cm (decision 0162); 0.5 cm is the hypothesis' level.
 QUIET_SIGMA_M = 0.005
@@ -142,7 +144,8 @@ class QuietMonitor:
     """The DD ionosphere's rate [m/s, vertical, L1] from the SD geometry-free phase, and whether it is quiet."""
 
     def __init__(self):
-        self._ref: dict[str, tuple[float, float]] = {}  # per satellite: (t, SD GF [m]) at the window's start
+        # per satellite: the window's start time and its least-squares sums (n, sum dt, sum g, sum dt^2, sum dt g)
+        self._win: dict[str, tuple[float, np.ndarray]] = {}
         self._rate: dict[str, tuple[float, float]] = {}  # per satellite: (t, SD GF rate [m/s]) of its last window
 
     def update(self, t: float, sats: list[str], gf_m: np.ndarray, broken: np.ndarray) -> None:
@@ -150,15 +153,22 @@ class QuietMonitor:
         for k, sat in enumerate(sats):
             g = float(gf_m[k])
             if broken[k] or not np.isfinite(g):
-                self._ref.pop(sat, None)
+                self._win.pop(sat, None)
                 self._rate.pop(sat, None)
                 continue
-            ref = self._ref.get(sat)
-            if ref is None:
-                self._ref[sat] = (t, g)
-            elif t - ref[0] >= RATE_WINDOW_S:
-                self._rate[sat] = (t, (g - ref[1]) / (t - ref[0]))
-                self._ref[sat] = (t, g)
+            win = self._win.get(sat)
+            if win is None:
+                win = self._win[sat] = (t, np.zeros(5))
+            dt = t - win[0]
+            win[1][:] += (1.0, dt, g, dt * dt, dt * g)
+            slope = _slope(win[1])
+            # a least-squares slope over the window's every epoch (a 1 Hz rover's GF noise averaged down), usable
+            # from RATE_MIN_S; a full window closes and the next one starts, its rate kept meanwhile
+            if dt >= RATE_WINDOW_S:
+                self._rate[sat] = (t, slope)
+                self._win[sat] = (t, np.zeros(5))
+            elif dt >= RATE_MIN_S and (sat not in self._rate or t - self._rate[sat][0] > RATE_WINDOW_S):
+                self._rate[sat] = (t, slope)
 
     def rms_rate(self, t: float, sats: list[str], el: np.ndarray) -> float | None:
         """The RMS vertical DD L1 ionosphere rate [m/s] over this epoch's satellites with a recent window
@@ -177,3 +187,10 @@ class QuietMonitor:
     def quiet(self, t: float, sats: list[str], el: np.ndarray) -> bool:
         rate = self.rms_rate(t, sats, el)
         return rate is not None and rate * QUIET_HORIZON_S <= QUIET_SIGMA_M
+
+
+def _slope(sums: np.ndarray) -> float:
+    """The least-squares slope of g over dt from the sums (n, sum dt, sum g, sum dt^2, sum dt g); NaN if degenerate."""
+    n, st, sg, stt, stg = sums
+    den = n * stt - st * st
+    return float((n * stg - st * sg) / den) if den > 0 else math.nan
