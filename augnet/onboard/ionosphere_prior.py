@@ -123,7 +123,7 @@ class LearnedPrior:
 # The DD ionosphere's rate from the SD geometry-free phase (L1 - L2 [m] = (mu2 - 1) I1, no geometry, no clock):
 # per satellite over RATE_WINDOW_S [s] of an unbroken arc, against the highest satellite, vertical (over
 # sqrt(M_k^2 + M_ref^2)).  A 1 Hz rover's GF multipath (mm, minutes) sets the window: longer averages it down.
-RATE_WINDOW_S = 120.0
+RATE_WINDOW_S = 60.0
 # ... and the shortest span [s] whose least-squares slope is used before a first full window (a cold start).
 RATE_MIN_S = 30.0
 # The tight prior tried when the rate says the night is quiet [m]: the vertical SD ionosphere of fixed
