@@ -199,8 +199,9 @@ def test_defaults_on_garr_upc1_from_a_cold_start_fix_within_a_minute_none_beyond
 
 
 @pytest.mark.xfail(strict=True, reason="the first fix needs a 30 s GF rate and two base epochs (first at 32 s): "
-                   "05:00-05:20 ours 1,168/1,200, RTKLIB timeinterp 1,171/1,171 (it fixes from the first epoch "
-                   "with the ionosphere out of its model); three cold starts not measured yet (decision 0220)")
+                   "cold starts 05:00 / 05:20 / 05:40 ours 1,168 / 1,138 / 1,018 of 1,200 (first fix 32 / 62 / 182 s), "
+                   "RTKLIB timeinterp 1,171 of 1,171 each (it fixes from the first epoch with the ionosphere out of "
+                   "its model); 0 beyond 10 cm either (decision 0220)")
 def test_defaults_on_garr_upc1_from_three_cold_starts(runs):
     """The brief's figure on the test's window: with our defaults fix at least as many epochs as RTKLIB."""
     n, n_fix, err = runs["defaults interp"]
