@@ -102,4 +102,4 @@ def interpolate(b0: EpochObs, b1: EpochObs, t: float, nav: NavigationData, base_
     dop = np.where(np.isfinite(dop1), b0.doppler_hz + f * (dop1 - b0.doppler_hz), b0.doppler_hz)
     lli = b0.lli if first_after_b0 else (b0.lli & LLI_HALF_CYCLE)
     return EpochObs(float(t), b0.sats, code, phase, dop, b0.snr_dbhz.copy(), lli.copy(), wl, b0.signal,
-                    float(min(t - t0, t1 - t)))
+                    float(min(t - t0, t1 - t)), t1)

@@ -117,3 +117,80 @@ class LearnedPrior:
             return None
         return max(LEARNED_FLOOR_PPM * PPM * baseline_m,
                    DAY_ADAPT * math.sqrt(self._day_ms) * rms_upper_bound_factor(self._day_n))
+
+
+# --- the quiet-ionosphere hypothesis (before the day's level is known) -----------------------------------
+# The DD ionosphere's rate from the SD geometry-free phase (L1 - L2 [m] = (mu2 - 1) I1, no geometry, no clock):
+# per satellite over RATE_WINDOW_S [s] of an unbroken arc, against the highest satellite, vertical (over
+# sqrt(M_k^2 + M_ref^2)).  A 1 Hz rover's GF multipath (mm, minutes) sets the window: longer averages it down.
+RATE_WINDOW_S = 60.0
+# ... and the shortest span [s] whose least-squares slope is used before a first full window (a cold start).
+RATE_MIN_S = 30.0
+# The tight prior tried when the rate says the night is quiet [m]: the vertical SD ionosphere of fixed
+# satellites at 20 km on catnet-2010-077 was 0.3-1.0 cm (decision 0162); 0.5 cm is the hypothesis' level.
+QUIET_SIGMA_M = 0.005
+# Quiet: the RMS vertical DD rate would take at least this long [s] to move the DD ionosphere by QUIET_SIGMA_M:
+# the span of the decisions a quiet fix rests on (two 30 s base epochs, `RtkFilter._spans_base_epochs`), after
+# which the fixed satellites' own level (LearnedPrior) decides.  Measured 2.7-5.7e-5 m/s RMS at 20 km on
+# catnet-2010-077 05:00-05:20 (mostly the rover's GF multipath over 120 s), against 8.3e-5 allowed.
+QUIET_HORIZON_S = 60.0
+# A quiet fix's own check: each fixed satellite's DD ionosphere within this many sigmas of the tight prior.
+QUIET_CHECK_SIGMAS = 3.0
+# mu of L2 over L1 for GPS: (f1 / f2)^2 = (1575.42 / 1227.60)^2.
+GPS_MU2 = (1575.42 / 1227.60) ** 2
+
+
+class QuietMonitor:
+    """The DD ionosphere's rate [m/s, vertical, L1] from the SD geometry-free phase, and whether it is quiet."""
+
+    def __init__(self):
+        # per satellite: the window's start time and its least-squares sums (n, sum dt, sum g, sum dt^2, sum dt g)
+        self._win: dict[str, tuple[float, np.ndarray]] = {}
+        self._rate: dict[str, tuple[float, float]] = {}  # per satellite: (t, SD GF rate [m/s]) of its last window
+
+    def update(self, t: float, sats: list[str], gf_m: np.ndarray, broken: np.ndarray) -> None:
+        """This epoch's SD geometry-free phase per satellite (NaN: none); `broken`: its arc slipped."""
+        for k, sat in enumerate(sats):
+            g = float(gf_m[k])
+            if broken[k] or not np.isfinite(g):
+                self._win.pop(sat, None)
+                self._rate.pop(sat, None)
+                continue
+            win = self._win.get(sat)
+            if win is None:
+                win = self._win[sat] = (t, np.zeros(5))
+            dt = t - win[0]
+            win[1][:] += (1.0, dt, g, dt * dt, dt * g)
+            slope = _slope(win[1])
+            # a least-squares slope over the window's every epoch (a 1 Hz rover's GF noise averaged down), usable
+            # from RATE_MIN_S; a full window closes and the next one starts, its rate kept meanwhile
+            if dt >= RATE_WINDOW_S:
+                self._rate[sat] = (t, slope)
+                self._win[sat] = (t, np.zeros(5))
+            elif dt >= RATE_MIN_S and (sat not in self._rate or t - self._rate[sat][0] > RATE_WINDOW_S):
+                self._rate[sat] = (t, slope)
+
+    def rms_rate(self, t: float, sats: list[str], el: np.ndarray) -> float | None:
+        """The RMS vertical DD L1 ionosphere rate [m/s] over this epoch's satellites with a recent window
+        (against the highest of them); None with fewer than DAY_MIN_SATS + 1."""
+        idx = [k for k, s in enumerate(sats) if s in self._rate and t - self._rate[s][0] <= 2 * RATE_WINDOW_S
+               and np.isfinite(el[k])]
+        if len(idx) < DAY_MIN_SATS + 1:
+            return None
+        idx = np.array(idx)
+        r = np.array([self._rate[sats[k]][1] for k in idx]) / (GPS_MU2 - 1.0)
+        m = mapping(el[idx])
+        ref = int(np.argmax(el[idx]))
+        dd = np.delete((r - r[ref]) / np.hypot(m, m[ref]), ref)
+        return float(np.sqrt(np.mean(dd**2)))
+
+    def quiet(self, t: float, sats: list[str], el: np.ndarray) -> bool:
+        rate = self.rms_rate(t, sats, el)
+        return rate is not None and rate * QUIET_HORIZON_S <= QUIET_SIGMA_M
+
+
+def _slope(sums: np.ndarray) -> float:
+    """The least-squares slope of g over dt from the sums (n, sum dt, sum g, sum dt^2, sum dt g); NaN if degenerate."""
+    n, st, sg, stt, stg = sums
+    den = n * stt - st * st
+    return float((n * stg - st * sg) / den) if den > 0 else math.nan

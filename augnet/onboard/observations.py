@@ -111,6 +111,13 @@ class EpochObs:
     signal: np.ndarray  # (N, F) '<U3' RINEX signal ('1C', '2W', '' when none)
     # an epoch made from others (base_interpolation.py): how old its information is [s]; NaN for a measured one
     info_age_s: float = math.nan
+    # ... and the newest measured epoch whose information went into it [GPST s]; NaN: its own time
+    newest_epoch_s: float = math.nan
+
+    @property
+    def newest_time(self) -> float:
+        """The time of the newest measured epoch behind these observations (its own for a measured one)."""
+        return self.time if math.isnan(self.newest_epoch_s) else float(self.newest_epoch_s)
 
     @property
     def n_slots(self) -> int:
@@ -124,12 +131,13 @@ class EpochObs:
         dop = np.where(np.abs(self.doppler_hz) < MAX_ABS_DOPPLER_HZ, self.doppler_hz, np.nan)
         snr = np.where(np.isfinite(self.snr_dbhz), self.snr_dbhz, np.nan)
         return EpochObs(float(self.time), self.sats, code, phase, dop, snr, self.lli, self.wavelength_m, self.signal,
-                        self.info_age_s)
+                        self.info_age_s, self.newest_epoch_s)
 
     def take(self, index) -> "EpochObs":
         idx = np.asarray(index)
         return EpochObs(self.time, self.sats[idx], self.code_m[idx], self.phase_cyc[idx], self.doppler_hz[idx],
-                        self.snr_dbhz[idx], self.lli[idx], self.wavelength_m[idx], self.signal[idx], self.info_age_s)
+                        self.snr_dbhz[idx], self.lli[idx], self.wavelength_m[idx], self.signal[idx], self.info_age_s,
+                        self.newest_epoch_s)
 
 
 def choose_signals(data: ObsArrays, n_slots: int = 2, systems: Sequence[str] = SUPPORTED_SYSTEMS) -> dict[str, list[str]]:

@@ -338,6 +338,14 @@ class RtkFilter:
         self._iono_sigma_now = 0.0
         self.confirmation = FixConfirmation(self.opt.min_fix_ambiguities)
         self.consecutive_fixes = 0
+        # the quiet-ionosphere hypothesis (`_resolve_quiet`): the GF rate monitor and its own decision streak
+        self._quiet = ionosphere_prior.QuietMonitor()
+        self._quiet_confirmation = FixConfirmation(self.opt.min_fix_ambiguities)
+        self._quiet_mode = False
+        # the newest base epoch behind the first decision of the current streak (a new fix on aged corrections
+        # must agree across a new base epoch), per streak: normal, quiet
+        self._streak_first_base = {False: math.nan, True: math.nan}
+        self._aged = False  # this epoch's corrections are older than correction_age.MIN_AGE_S
         self._last_solution: tuple[float, np.ndarray, np.ndarray] | None = None
         self._spp_inputs: tuple | None = None
         self.initialised = False
@@ -565,6 +573,8 @@ class RtkFilter:
         if ep is None:
             return self._single(t, spp, "no satellites common to rover and base", age)
         self._age_var = correction_age.sd_variance_m2(age, len(ep.sats)) if opt.age_variance else None
+        self._aged = bool(np.isfinite(age) and abs(age) >= correction_age.MIN_AGE_S)
+        self._watch_ionosphere_rate(ep)
         self._restart_slipped(ep)
         self._expire_states(t)
         # linearisation point: the state's position, or for a white-noise position (kinematic without
@@ -886,8 +896,72 @@ class RtkFilter:
     # -----------------------------------------------------------------------------------------
     # integer ambiguity resolution
 
+    def _watch_ionosphere_rate(self, ep: _CommonEpoch) -> None:
+        """Feed the quiet-ionosphere monitor this epoch's SD geometry-free phase (GPS L1 - L2 [m])."""
+        if ep.nf < 2:
+            return
+        ro, bo = ep.rover, ep.base
+        gf = ((ro.phase_cyc[:, 0] * ep.wl[:, 0] - ro.phase_cyc[:, 1] * ep.wl[:, 1])
+              - (bo.phase_cyc[:, 0] * bo.wavelength_m[:, 0] - bo.phase_cyc[:, 1] * bo.wavelength_m[:, 1]))
+        gf = np.where((ep.sys_ == "G") & ep.same_wl[:, :2].all(axis=1), gf, np.nan)
+        self._quiet.update(ep.t, ep.sats, gf, ep.slips[:, :2].any(axis=1))
+
+    def _quiet_applies(self, ep: _CommonEpoch) -> bool:
+        """Whether to try the quiet-ionosphere hypothesis this epoch: the ionosphere in the model on the per-km
+        prior of a physical base (the learned level not known yet) and the GF rate saying the night is quiet."""
+        opt = self.opt
+        return (self.iono_active and opt.iono_prior == "learned" and opt.iono_sigma_m is None
+                and not self.base_is_vrs and not self._learned.known and self.consecutive_fixes == 0
+                and self._quiet.quiet(ep.t, ep.sats, ep.zd_base.el))
+
     def _resolve(self, sol: RtkSolution, dd: DDIndex, ep: _CommonEpoch, sd: SingleDifferences,
                  x_lin: np.ndarray) -> None:
+        """Integer ambiguity resolution (`_resolve_with`), first under the quiet-ionosphere hypothesis when it
+        applies: the DD ionosphere tightened to QUIET_SIGMA_M (a pseudo-observation on a copy of the state), its
+        own streak of agreeing decisions, and a fix kept only when it passes its own check (ratio, residuals, and
+        its DD ionosphere within QUIET_CHECK_SIGMAS of that prior, `_quiet_consistent`); otherwise the state
+        is restored and the normal prior decides."""
+        if dd.ion is None or not self._quiet_applies(ep):
+            self._quiet_confirmation.reset()
+            self._resolve_with(sol, dd, ep, sd, x_lin)
+            return
+        x0, P0, conf0 = self.x.copy(), self.P.copy(), self.confirmation
+        self._tight_ionosphere(dd, ep)
+        self.confirmation, self._quiet_mode = self._quiet_confirmation, True
+        try:
+            self._resolve_with(sol, dd, ep, sd, x_lin)
+        finally:
+            self.confirmation, self._quiet_mode = conf0, False
+        if sol.status == Status.FIX:
+            sol.message = f"{sol.message} (quiet ionosphere)"
+            return
+        quiet_msg = sol.message
+        self.x, self.P = x0, P0
+        self._resolve_with(sol, dd, ep, sd, x_lin)
+        if sol.status != Status.FIX:
+            sol.message = f"{sol.message}; quiet hypothesis: {quiet_msg}"
+
+    def _tight_ionosphere(self, dd: DDIndex, ep: _CommonEpoch) -> None:
+        """The SD ionosphere states of this epoch's rows pulled to the quiet prior (zero, QUIET_SIGMA_M x M)."""
+        el = ep.zd_base.el
+        for k in np.unique(np.concatenate((dd.k, dd.ref))):
+            i = self.ion_state(ep.sats[k])
+            if i is None:
+                continue
+            var = ionosphere_prior.prior_variance(ionosphere_prior.QUIET_SIGMA_M, ionosphere_prior.mapping(el[k]))
+            H = np.zeros((1, len(self.x)))
+            H[0, i] = 1.0
+            self._kalman_update(np.array([-self.x[i]]), H, np.array([[var]]))
+
+    def _quiet_consistent(self, dd: DDIndex, ep: _CommonEpoch, rows: np.ndarray, attempt: "_FixAttempt") -> bool:
+        """A quiet fix's own check: every fixed row's DD ionosphere within QUIET_CHECK_SIGMAS of the quiet prior."""
+        el = ep.zd_base.el
+        m = np.hypot(ionosphere_prior.mapping(el[dd.k[rows]]), ionosphere_prior.mapping(el[dd.ref[rows]]))
+        ion = attempt.x[dd.ion[rows]] - attempt.x[dd.ion_ref[rows]]
+        return bool(np.all(np.abs(ion) <= ionosphere_prior.QUIET_CHECK_SIGMAS * ionosphere_prior.QUIET_SIGMA_M * m))
+
+    def _resolve_with(self, sol: RtkSolution, dd: DDIndex, ep: _CommonEpoch, sd: SingleDifferences,
+                      x_lin: np.ndarray) -> None:
         """Integer ambiguity resolution on this epoch's DD ambiguities; on success `sol` becomes FIX.
 
         A fixed solution must leave DD phase residuals at the noise level.  When it does not, one
@@ -948,7 +1022,7 @@ class RtkFilter:
         self.consecutive_fixes = 0
         if partial is not None and self._confirm_needed() > 1:
             attempt, prows = partial
-            count = self._confirm(dd, prows, attempt)
+            count = self._confirm(dd, prows, attempt, ep)
             message = f"{message}; {attempt.fix.count} combinations fixed, agreeing over {count} epochs"
         else:
             self.confirmation.reset()
@@ -981,9 +1055,11 @@ class RtkFilter:
     def _declare_or_confirm(self, sol: RtkSolution, dd: DDIndex, ep: _CommonEpoch, rows: np.ndarray,
                             attempt: _FixAttempt, n_all: int) -> None:
         """A validated complete fix: declared when its decision has agreed long enough, else a candidate."""
-        count = self._confirm(dd, rows, attempt)
+        count = self._confirm(dd, rows, attempt, ep)
         need = self._confirm_needed()
-        if count >= need:
+        spans = self._spans_base_epochs(ep, need)
+        quiet_ok = not self._quiet_mode or self._quiet_consistent(dd, ep, rows, attempt)
+        if count >= need and spans and quiet_ok:
             self._accept_fix(sol, attempt, n_all)
             if self.opt.iono_prior == "learned" and dd.ion is not None:
                 r = rows[dd.f[rows] == 0]
@@ -996,6 +1072,19 @@ class RtkFilter:
             self.consecutive_fixes = 0
             fix = attempt.fix
             sol.message = f"float: fix candidate {count}/{need} ({fix.count}/{n_all} ambiguities, ratio {fix.ratio:.1f})"
+            if count >= need and not spans:
+                sol.message += ", waiting for a new base epoch"
+            if not quiet_ok:
+                sol.message += ", DD ionosphere beyond the quiet prior"
+                self.confirmation.reset()
+
+    def _spans_base_epochs(self, ep: _CommonEpoch, need: int) -> bool:
+        """Whether a new fix's streak of agreeing decisions spans two base epochs, as it must on aged
+        corrections when a streak is needed at all: a 1 Hz rover reuses (or interpolates between) each 30 s base
+        epoch, so decisions within one base epoch share its errors and agree without proving anything."""
+        if need <= 1 or not self._aged or self.consecutive_fixes > 0:
+            return True
+        return ep.base.newest_time != self._streak_first_base[self._quiet_mode]
 
     def _confirm_needed(self) -> int:
         """Consecutive agreeing decisions a fix needs: the setting, else 1 for a short baseline (the model is
@@ -1004,10 +1093,17 @@ class RtkFilter:
             return max(1, int(self.opt.confirm_epochs))
         return CONFIRM_EPOCHS_WITH_IONOSPHERE if self.iono_active else 1
 
-    def _confirm(self, dd: DDIndex, rows: np.ndarray, attempt: _FixAttempt) -> int:
-        """The length of the streak of agreeing decisions this validated (complete or partial) fix ends."""
+    def _confirm(self, dd: DDIndex, rows: np.ndarray, attempt: _FixAttempt, ep: _CommonEpoch) -> int:
+        """The length of the streak of agreeing decisions this validated (complete or partial) fix ends (and
+        the newest base epoch behind the streak's first decision noted)."""
         if self._confirm_needed() <= 1:
             return 1  # declared at once: nothing to compare with
+        count = self._observe(dd, rows, attempt)
+        if count <= 1:
+            self._streak_first_base[self._quiet_mode] = ep.base.newest_time
+        return count
+
+    def _observe(self, dd: DDIndex, rows: np.ndarray, attempt: _FixAttempt) -> int:
         key_of = {i: key for key, i in self.layout.items()}
 
         def identity(i: int):  # an SD ambiguity state's (satellite, slot) and arc serial

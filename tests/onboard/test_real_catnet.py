@@ -30,6 +30,9 @@ pytestmark = [pytest.mark.shared_data, pytest.mark.slow, pytest.mark.rtklib]
 
 CATNET = "rinex/catnet-2010-077"
 UPC1_TRUTH = np.array([4789013.1051, 176610.1545, 4195034.8712])
+# The judge of our defaults (70 % troposphere): RTKLIB static against GARR with the troposphere estimated
+# ("est-ztd", docs/decisions/0165, 0173).
+UPC1_TRUTH_EST_ZTD = np.array([4789013.0854, 176610.1611, 4195034.8637])
 START, END = "2010-03-18T05:00:00", "2010-03-18T05:20:00"
 OURS = ["--systems", "G", "--frequencies", "2", "--elevation-mask", "15", "--max-age", "30",
         "--opt", "ionosphere=off", "--opt", "tropo_humidity=0"]
@@ -107,21 +110,26 @@ def runs(shared_data, tmp_path_factory):
         rows = _read_csv(out)
         return rows, [[float(row[k]) for k in ("x_m", "y_m", "z_m")] for row in rows if row["status"] == "fix"]
 
-    def errors(xyz):
-        return np.linalg.norm(ecef_to_enu(np.asarray(xyz) - UPC1_TRUTH, UPC1_TRUTH), axis=-1)
+    def errors(xyz, truth=UPC1_TRUTH):
+        return np.linalg.norm(ecef_to_enu(np.asarray(xyz) - truth, truth), axis=-1)
 
     rows, o_fix = ours(OURS)
     rows_l, l_fix = ours(OURS_LEARNED)
     rows_i, i_fix = ours([*OURS, "--base-interp"])
     rows_li, li_fix = ours([*OURS_LEARNED, "--base-interp"])
+    rows_d, d_fix = ours([*OURS[:8], "--base-interp"])  # every model setting at its default
+    first_d = next((k for k, row in enumerate(rows_d) if row["status"] == "fix"), len(rows_d))
     t_fix = [p for p, q in theirs.values() if q == 1]
     ti_fix = [p for p, q in theirs_interp.values() if q == 1]
     res = {"ours": (len(rows), len(o_fix), errors(o_fix)), "learned": (len(rows_l), len(l_fix), errors(l_fix)),
            "rtklib": (len(theirs), len(t_fix), errors(t_fix)),
            "ours interp": (len(rows_i), len(i_fix), errors(i_fix)),
            "learned interp": (len(rows_li), len(li_fix), errors(li_fix)),
-           "rtklib interp": (len(theirs_interp), len(ti_fix), errors(ti_fix))}
-    for k, (n, nf, e) in res.items():
+           "rtklib interp": (len(theirs_interp), len(ti_fix), errors(ti_fix)),
+           "defaults interp": (len(rows_d), len(d_fix), errors(d_fix, UPC1_TRUTH_EST_ZTD))}
+    print(f"defaults interp: first fix at epoch {first_d}")
+    res["defaults first fix"] = first_d
+    for k, (n, nf, e) in ((k, v) for k, v in res.items() if isinstance(v, tuple)):
         print(f"{k}: {nf}/{n} fixed, {int(np.sum(e > MAX_FIX_ERROR_M))} beyond 10 cm, "
               f"median {np.median(e) * 100:.1f} cm")
     return res
@@ -158,9 +166,9 @@ def test_with_the_base_interpolated_fixes_as_often_as_rtklib_and_none_beyond_10c
 
 
 def test_the_learned_prior_on_the_interpolated_base_fixes_most_epochs_none_beyond_10cm(runs):
-    """The default ionosphere handling on the interpolated base: float until its first fix on the per-km prior
-    (814 of 1,200 fixed), and the interpolation removes the aged-correction errors (7 -> 1 beyond 10 cm; the one
-    left is the first complete fix's epoch, 11.6 cm off at a reported vertical sigma of 2.6 cm: decision 0173)."""
+    """The default ionosphere handling on the interpolated base: float until its first fix (the quiet-ionosphere
+    hypothesis after 30 s, decision 0220: 1,168 of 1,200 fixed, first at 32 s; before it 814, on the per-km
+    prior), and the interpolation removes the aged-correction errors (7 -> 0 beyond 10 cm; decision 0173)."""
     n, n_fix, err = runs["learned interp"]
     _, _, err_l = runs["learned"]
     assert n == 1200 and n_fix >= 0.6 * n
@@ -174,3 +182,28 @@ def test_the_learned_ionosphere_prior_fixes_most_epochs_with_no_more_errors_beyo
     _, _, err_t = runs["rtklib"]
     assert n == 1200 and n_fix >= 0.85 * n
     assert np.sum(err > MAX_FIX_ERROR_M) <= np.sum(err_t > MAX_FIX_ERROR_M)
+
+
+def test_defaults_on_garr_upc1_from_a_cold_start_fix_within_a_minute_none_beyond_10cm(runs):
+    """Every model setting at its default (learned ionosphere prior, 70 % troposphere), the base interpolated,
+    judged against the est-ztd truth, cold start 05:00 (docs/decisions/0220).  The quiet-ionosphere hypothesis
+    (the GF rate over the first 30 s says the DD ionosphere is quiet; a 0.5 cm prior, its fix self-checked)
+    and the two-base-epoch agreement give 1,168 of 1,200 fixed, first fix at 32 s, 0 beyond 10 cm (main: 814,
+    first fix at 386 s)."""
+    n, n_fix, err = runs["defaults interp"]
+    assert n == 1200 and n_fix > 0 and np.sum(err > MAX_FIX_ERROR_M) == 0
+    # a quiet fix rests on a 30 s GF rate and two base epochs (30 s apart): the first fix within two of them
+    assert runs["defaults first fix"] <= 60
+    # once fixed, it stays fixed (the learned level follows the quiet fix)
+    assert n_fix >= n - runs["defaults first fix"] - 5
+
+
+@pytest.mark.xfail(strict=True, reason="the first fix needs a 30 s GF rate and two base epochs (first at 32 s): "
+                   "cold starts 05:00 / 05:20 / 05:40 ours 1,168 / 1,138 / 1,018 of 1,200 (first fix 32 / 62 / 182 s), "
+                   "RTKLIB timeinterp 1,171 of 1,171 each (it fixes from the first epoch with the ionosphere out of "
+                   "its model); 0 beyond 10 cm either (decision 0220)")
+def test_defaults_on_garr_upc1_from_three_cold_starts(runs):
+    """The brief's figure on the test's window: with our defaults fix at least as many epochs as RTKLIB."""
+    n, n_fix, err = runs["defaults interp"]
+    _, n_fix_t, _ = runs["rtklib interp"]
+    assert n_fix >= n_fix_t and np.sum(err > MAX_FIX_ERROR_M) == 0
