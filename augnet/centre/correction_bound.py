@@ -234,3 +234,9 @@ class CorrectionBound:
               ionosphere_level_ppm: float | None = None) -> np.ndarray:
         """The bound [m] at each train: K_CORRECTION_BOUND x sigma (trains x satellites; NaN: none)."""
         return K_CORRECTION_BOUND * self.sigma(station_en, train_en, sats, ionosphere_level_ppm)
+
+
+def correction_residuals(dd_iono_m: np.ndarray, dd_trop_m: np.ndarray) -> np.ndarray:
+    """The DD correction the VRS applies to the f1 carrier phase: non-dispersive minus ionosphere (the phase
+    advance), stations x satellites [m]; the quantity the bound is for (docs/correction-bound-message.md)."""
+    return np.asarray(dd_trop_m, float) - np.asarray(dd_iono_m, float)
