@@ -62,7 +62,7 @@ def measure(scenario, duration_s: float | None = None) -> dict:
     trains = [r for r in ids if kinds[r] == "train"]
     net = NetworkSolver({r.id: r.ecef[0] for r in world.receivers if r.id in stations})
     cb = CorrectionBound()
-    errs, bounds, epochs, bounded = [], [], 0, 0
+    errs, bounds, epochs, bounded, worst = [], [], 0, 0, []
     for blk in world.epochs():
         for e in range(len(blk.t_gpst)):
             ne = net.update({r: station_epoch(world, blk, e, ids.index(r)) for r in stations}, world.nav)
@@ -83,6 +83,7 @@ def measure(scenario, duration_s: float | None = None) -> dict:
                     continue
                 epochs += 1
                 bounded += int(np.all(np.abs(err[ok]) <= bound[k][ok]))
+                worst.append((float(blk.t_gpst[e]), t, float(np.max(np.abs(err[ok]) / bound[k][ok]))))
                 errs.append(np.abs(err[ok]))
                 bounds.append(bound[k][ok])
     a_err, a_bound = np.concatenate(errs), np.concatenate(bounds)
@@ -91,7 +92,7 @@ def measure(scenario, duration_s: float | None = None) -> dict:
             "fraction_bounded": bounded / epochs, "samples": a_err.size,
             "samples_bounded": float(np.mean(a_err <= a_bound)), "error_p999_m": p999,
             "bound_median_m": float(np.median(a_bound)), "ratio_median": float(np.median(a_bound)) / p999,
-            "ratio_max": float(a_bound.max()) / p999}
+            "ratio_max": float(a_bound.max()) / p999, "worst_error_over_bound": worst}
 
 
 if __name__ == "__main__":  # python -m stations.correction_truth demo [duration_s]

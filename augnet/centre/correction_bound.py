@@ -47,6 +47,10 @@ K_CORRECTION_BOUND = normal_quantile(1.0 - CORRECTION_BOUND_RISK / 2.0)
 # Fewer normalised samples than this for a satellite: its own overbound's extreme order statistic sits at
 # probability 1/20 and says nothing about the 1e-3 tail; the pooled one is used instead.
 MIN_SAMPLES = 20
+# No bound (NaN) until the window holds this many epochs: one epoch already gives the pooled MIN_SAMPLES, but
+# all from one instant of the field; the demo run's first 15 epochs were not bounded by such a bound
+# (docs/decisions/0280). Half the window: the sample then spans half a minute of the field's evolution.
+MIN_WINDOW_EPOCHS = WINDOW_EPOCHS // 2
 # Geometry floor [m]: closer to a station than this the error no longer shrinks with distance; the floor is
 # the station residual's own noise, which the held-out samples carry too. 5 km is where the single-base DD
 # ionosphere is a few mm (augnet.centre.vrs.UNCORRECTED_MAX_DISTANCE_M, network-rtk.md).
@@ -131,9 +135,12 @@ class CorrectionBound:
     """Sliding-window leave-one-out overbound of the interpolation error, per satellite; `update` once per
     epoch with the network's residuals, `sigma` / `bound` for any number of trains."""
 
-    def __init__(self, window_epochs: int = WINDOW_EPOCHS, min_samples: int = MIN_SAMPLES):
+    def __init__(self, window_epochs: int = WINDOW_EPOCHS, min_samples: int = MIN_SAMPLES,
+                 min_window_epochs: int | None = None):
         if window_epochs < 1 or min_samples < 1:
             raise CorrectionBoundError("window_epochs and min_samples must be >= 1")
+        self.min_window_epochs = min(MIN_WINDOW_EPOCHS, window_epochs) if min_window_epochs is None \
+            else min_window_epochs
         self.window_epochs = window_epochs
         self.min_samples = min_samples
         self._window: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=window_epochs)
@@ -160,8 +167,14 @@ class CorrectionBound:
             err = interpolation.leave_one_out(en, v, model, master)
             geom = np.maximum(held_out_distance(en), MIN_GEOMETRY_DISTANCE_M)
             z = err / (geom[:, None] * self._level(ionosphere_level_ppm))
+        noise = self._noise_samples(en, v, sats, master)
+        # a system's reference satellite has a zero DD everywhere: its zeros say nothing of any error, and kept
+        # they would give that satellite a zero bound once another reference takes over
+        ref = np.all((v == 0.0) | ~np.isfinite(v), axis=0)
+        z = np.where(ref[None, :], np.nan, z)
+        noise[:, ref] = np.nan
         self._window.append((sats, z))
-        self._noise.append((sats, self._noise_samples(en, v, sats, master)))
+        self._noise.append((sats, noise))
         return z
 
     def _noise_samples(self, en: np.ndarray, v: np.ndarray, sats: np.ndarray, master: int) -> np.ndarray:
@@ -225,7 +238,10 @@ class CorrectionBound:
 
     def sigma(self, station_en: np.ndarray, train_en: np.ndarray, sats,
               ionosphere_level_ppm: float | None = None) -> np.ndarray:
-        """Overbound sigma [m] of the interpolation error at each train (trains x satellites)."""
+        """Overbound sigma [m] of the interpolation error at each train (trains x satellites); NaN (no bound)
+        while the window holds fewer than `min_window_epochs` epochs."""
+        if len(self._window) < self.min_window_epochs:
+            return np.full((np.atleast_2d(train_en).shape[0], len(sats)), np.nan)
         geom = np.maximum(nearest_station_distance(station_en, train_en), MIN_GEOMETRY_DISTANCE_M)
         field = geom[:, None] * self._level(ionosphere_level_ppm) * self.normalised_sigma(sats)[None, :]
         return np.hypot(field, self.noise_sigma(sats)[None, :])

@@ -133,3 +133,17 @@ def test_bound_grows_with_distance_and_ionosphere():
     # the field part scales with the ionosphere level; the station-noise part does not
     noise = K_CORRECTION_BOUND * cb.noise_sigma(SATS)
     assert np.allclose(np.sqrt(b_storm ** 2 - noise ** 2), 5 * np.sqrt(b_far ** 2 - noise ** 2))
+
+
+def test_no_bound_before_the_window_has_filled_and_references_carry_no_sample():
+    cb = CorrectionBound(min_window_epochs=10)
+    rng = np.random.default_rng(8)
+    for i in range(12):
+        V = 0.01 * rng.standard_normal((len(STATIONS_EN), len(SATS)))
+        V[0] = 0.0
+        V[:, 0] = 0.0  # G01 is the reference: zero DD everywhere
+        cb.update(STATIONS_EN, V, SATS, ionosphere_level_ppm=IONO_PPM)
+        b = cb.bound(STATIONS_EN, np.array([[20e3, 15e3]]), SATS, IONO_PPM)
+        assert np.isnan(b).all() == (i + 1 < 10)
+    assert np.isnan(cb.samples(["G01"])).all()
+    assert np.all(b[0, 1:] > 0) and b[0, 0] > 0  # the ex-reference takes the pooled bound, never zero

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from pyrtcm import RTCMReader
 
+from augnet.centre.correction_bound import CorrectionBound
 from augnet.centre.engine import CentreEngine, CentreStreamFactory
 from augnet.centre.ingest import StationDecoder
 from augnet.gnss.geometry import ecef_to_geodetic
@@ -21,9 +22,16 @@ pytestmark = pytest.mark.slow
 DURATION_S = 20
 
 
+# the recorded run is shorter than the bound's warm-up (MIN_WINDOW_EPOCHS): a shorter one here, so that the
+# stream carries finite bounds within it
+WARM_UP_EPOCHS = 5
+
+
 def _serve(**engine_options):
     world, streams, stations = recorded_streams(DURATION_S)
     engine = CentreEngine(stations, world.t0, network_name="test", **engine_options)
+    if engine.correction_bound is not None:
+        engine.correction_bound = CorrectionBound(min_window_epochs=WARM_UP_EPOCHS)
     got = bytearray()
     check = world.receivers[world.receiver_ids.index("check1")].ecef[0]
     lat, lon, h = ecef_to_geodetic(check)
