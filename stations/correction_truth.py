@@ -86,6 +86,9 @@ def measure(scenario, duration_s: float | None = None) -> dict:
                 worst.append((float(blk.t_gpst[e]), t, float(np.max(np.abs(err[ok]) / bound[k][ok]))))
                 errs.append(np.abs(err[ok]))
                 bounds.append(bound[k][ok])
+    if not errs:
+        raise ValueError(f"{sc.name}, {sc.duration_s:g} s: no train epoch had both a bound and a fixed network "
+                         "correction to judge (the network fixes nothing yet?)")
     a_err, a_bound = np.concatenate(errs), np.concatenate(bounds)
     p999 = float(np.quantile(a_err, 0.999))
     return {"scenario": sc.name, "duration_s": sc.duration_s, "train_epochs": epochs, "bounded": bounded,
