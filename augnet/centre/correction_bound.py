@@ -165,6 +165,13 @@ class CorrectionBound:
             z = np.full(v.shape, np.nan)
         else:
             err = interpolation.leave_one_out(en, v, model, master)
+            # the held-out station beyond the along-line model's cross-line limit (an end station of a bent
+            # 3-station line) gets no prediction: take inverse-distance weights there, a coarser model whose
+            # larger error keeps the sample on the safe side rather than leaving the network without one
+            gap = ~np.isfinite(err) & np.isfinite(v)
+            gap[master] = False
+            if gap.any():
+                err = np.where(gap, interpolation.leave_one_out(en, v, interpolation.Model.DISTANCE, master), err)
             geom = np.maximum(held_out_distance(en), MIN_GEOMETRY_DISTANCE_M)
             z = err / (geom[:, None] * self._level(ionosphere_level_ppm))
         noise = self._noise_samples(en, v, sats, master)
