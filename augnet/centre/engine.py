@@ -33,6 +33,7 @@ from typing import Callable
 import numpy as np
 
 from augnet.centre.baseline_config import BaselineConfig
+from augnet.centre.correction_bound import CorrectionBound, correction_residuals, ionosphere_level_ppm
 from augnet.centre.ingest import EpochAligner, StationDecoder
 from augnet.centre.integrity import Alarm
 from augnet.centre.network import MEMBERSHIP_KIND, MembershipChange, NetworkEpoch, NetworkSolver
@@ -41,6 +42,7 @@ from augnet.centre.vrs import VrsEpoch, VrsPlan, synthesize
 from augnet.centre.vrs_admission import AdmissionBatch, AdmissionConfig, fixed_somewhere
 from augnet.centre.vrs_stream import VrsStreamEncoder
 from augnet.gnss.antex import AntexFile, read_antex
+from augnet.gnss.geometry import ecef_to_enu
 from augnet.gnss.ephemeris import Ephemeris, NavigationData
 from augwire.errors import StreamRefused
 
@@ -97,7 +99,7 @@ class CentreEngine:
                  ephemerides: list[Ephemeris] | None = None, msm_level: int = 7,
                  vrs_before_network: bool = True, antex: AntexFile | str | None = None,
                  antenna_types: dict[str, str] | None = None, area: AreaConfig | None = None,
-                 admission: AdmissionConfig | None = None):
+                 admission: AdmissionConfig | None = None, correction_bound: bool = False):
         self.network_name = network_name
         self.antex = read_antex(antex) if isinstance(antex, (str, bytes)) or hasattr(antex, "__fspath__") else antex
         self.antenna_types: dict[str, str] = {}  # station -> antenna type in use (1033 or configured)
@@ -114,7 +116,10 @@ class CentreEngine:
         self.nav = NavigationData([])
         if ephemerides:
             self._add_ephemerides(ephemerides)
-        self.encoder = VrsStreamEncoder(msm_level)
+        self.encoder = VrsStreamEncoder(msm_level, send_correction_bound=correction_bound)
+        # the centre's bound on its correction error, sent as 4001 after each VRS epoch: opt-in (default off,
+        # docs/correction-bound-message.md), so a stream without it is byte for byte what it was
+        self.correction_bound = CorrectionBound() if correction_bound else None
         self.admission = AdmissionBatch(admission)  # per session: when newly corrected satellites enter its VRS
         self.sessions: dict[str, Session] = {}
         self._station_ids = itertools.count(FIRST_VRS_STATION_ID)
@@ -335,6 +340,9 @@ class CentreEngine:
         if prev is not None and ids:
             vrs = self._serve(ids, prev, eps)
         ne = self.network.update(eps, self.nav)
+        if self.correction_bound is not None and len(ne.stations):
+            self.correction_bound.update(ne.station_en_m, correction_residuals(ne.dd_iono_m, ne.dd_trop_m),
+                                         ne.sats, 0, ionosphere_level_ppm(ne.station_en_m, ne.dd_iono_m, 0))
         if self._prev is not None and 0.0 < t - self._prev.t_gpst <= MAX_CORRECTION_LAG_S:
             self._interval_s = t - self._prev.t_gpst
         self._prev = ne
@@ -369,11 +377,12 @@ class CentreEngine:
                 self._admit(ids, ne, vrs)
             t1 = time.perf_counter()
             if vrs is not None:
+                sigma, level = self._bound_sigma(ne, vrs)
                 group = self.serve_group or len(ids)
                 for a in range(0, len(ids), group):
                     sub = ids[a:a + group]
                     out = self.encoder.encode(sub, vrs.rows(slice(a, a + group)) if group < len(ids) else vrs,
-                                              self.nav)
+                                              self.nav, None if sigma is None else sigma[a:a + group], level)
                     self.serve_cost_s = (t1 - t0, time.perf_counter() - t1, time.process_time() - c0,
                                          float(bool(vrs.flags.get("planned"))))
                     for cid in sub:
@@ -392,6 +401,18 @@ class CentreEngine:
         if self.after_serve is not None:
             self.after_serve(True)
         return vrs
+
+    def _bound_sigma(self, ne: NetworkEpoch, vrs: VrsEpoch) -> tuple[np.ndarray | None, float]:
+        """Overbound sigma [m] of the correction error per session and VRS satellite (None when not sent)."""
+        if self.correction_bound is None or not len(ne.stations):
+            return None, float("nan")
+        origin = ne.station_xyz_m[0]
+        rover_en = ecef_to_enu(vrs.points_ecef_m - origin, origin)[:, :2]
+        level = ionosphere_level_ppm(ne.station_en_m, ne.dd_iono_m, 0)
+        sigma = self.correction_bound.sigma(ne.station_en_m, rover_en, vrs.sats, level)
+        # satellites sent without network corrections (near the master) carry the master's own residual
+        # atmosphere, not an interpolation error this bound speaks for: no bound for them
+        return np.where(vrs.corrected, sigma, np.nan), level
 
     def _admit(self, ids: list[str], ne: NetworkEpoch, vrs: VrsEpoch) -> None:
         """Each session's admission decision on its VRS epoch, in place: in a network VRS the corrected satellites

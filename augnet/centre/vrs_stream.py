@@ -5,7 +5,11 @@ Per epoch and client, in this order (what RTKLIB and commercial rovers expect of
     `STATION_INTERVAL_S`; 1033 (descriptors) every `STATION_INTERVAL_S`;
   * broadcast ephemerides (1019 / 1046 / 1042) of the satellites in the VRS every `EPHEMERIS_INTERVAL_S`
     and whenever a satellite's set changes;
-  * MSM7 (or MSM4) per system, the multiple-message bit set on all but the epoch's last.
+  * MSM7 (or MSM4) per system, the multiple-message bit set on all but the epoch's last;
+  * only when the stream is built with `send_correction_bound=True` (default off: opt-in, see
+    docs/correction-bound-message.md) and the epoch comes with a bound: the proprietary 4001 with the
+    centre's overbound sigma of the correction error per satellite sent (`augnet.centre.correction_bound`),
+    after the MSM; clients that do not know 4001 skip it like any unknown message type.
 
 The MSM of one system is encoded for every client in one batch (`encode_msm_batch`). Lock times and
 whole-cycle phase offsets (MSM holds the phase within +-1171 m of the code) are kept per client, satellite
@@ -25,6 +29,7 @@ from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
 from augnet.gnss.ephemeris import NavigationData
 from augnet.gnss.rtcm import encode_frame
 from augnet.gnss.rtcm.batch import encode_msm_batch
+from augnet.gnss.rtcm.correction_bound import MAX_SATELLITES, CorrectionBoundMessage, encode_correction_bound_frame
 from augnet.gnss.rtcm.ephemeris import ephemeris_message
 from augnet.gnss.rtcm.layouts import MSM_MAX_CELLS
 from augnet.gnss.rtcm.observables import phase_offset_cycles
@@ -75,8 +80,9 @@ class _EpochContext:
 
 
 class VrsStreamEncoder:
-    def __init__(self, msm_level: int = 7):
+    def __init__(self, msm_level: int = 7, send_correction_bound: bool = False):
         self.level = msm_level
+        self.send_correction_bound = send_correction_bound  # 4001 after the MSM: opt-in, default off
         self.clients: dict[str, Client] = {}
         self._eph_frames: dict[int, bytes] = {}  # ephemeris row -> its framed message (encoded once)
         self._sat_ids: dict[str, int] = {}
@@ -166,8 +172,11 @@ class VrsStreamEncoder:
             k = self._keys[(sat, code)] = len(self._keys)
         return k
 
-    def encode(self, ids: list[str], vrs: VrsEpoch, nav: NavigationData) -> dict[str, bytes]:
-        """The epoch's RTCM bytes for each client in `ids` (rows of `vrs` in the same order)."""
+    def encode(self, ids: list[str], vrs: VrsEpoch, nav: NavigationData, bound_sigma_m: np.ndarray | None = None,
+               ionosphere_level_ppm: float = float("nan")) -> dict[str, bytes]:
+        """The epoch's RTCM bytes for each client in `ids` (rows of `vrs` in the same order). With
+        `send_correction_bound` and `bound_sigma_m` (clients x `vrs.sats` overbound sigma [m], NaN = none), each
+        client's bytes end with a 4001 for the satellites its MSM carry."""
         t = vrs.t_gpst
         ctx = self._context(vrs, nav)
         out = {cid: bytearray() for cid in ids}
@@ -213,7 +222,25 @@ class VrsStreamEncoder:
             buf = out[cid]
             for data, off in views:
                 buf += data[off[i]:off[i + 1]]
+        if self.send_correction_bound and bound_sigma_m is not None:
+            self._bound_frames(ids, vrs, ctx, np.asarray(bound_sigma_m, float), ionosphere_level_ppm, out)
         return {cid: bytes(b) for cid, b in out.items()}
+
+    def _bound_frames(self, ids, vrs: VrsEpoch, ctx: "_EpochContext", sigma: np.ndarray, level: float,
+                      out: dict) -> None:
+        """Append each client's 4001 (several when it carries more than MAX_SATELLITES satellites)."""
+        if sigma.shape != (len(ids), len(vrs.sats)):
+            raise ValueError(f"bound sigma of shape {sigma.shape}, expected {(len(ids), len(vrs.sats))}")
+        sent = np.isfinite(vrs.code_m).any(axis=2) & np.isin(
+            np.array([str(x)[0] for x in vrs.sats]), list(ctx.systems))[None, :]
+        epoch = msm_epoch_ms("G", vrs.t_gpst)
+        for i, cid in enumerate(ids):
+            cols = np.flatnonzero(sent[i])
+            c = self.clients[cid]
+            for a in range(0, len(cols), MAX_SATELLITES):
+                part = cols[a:a + MAX_SATELLITES]
+                out[cid] += encode_correction_bound_frame(CorrectionBoundMessage(
+                    c.station_id, epoch, c.station_id, [str(s) for s in vrs.sats[part]], sigma[i, part], level))
 
     def _context(self, vrs: VrsEpoch, nav: NavigationData) -> "_EpochContext":
         """What the epoch's encoding needs that does not depend on the clients: worked out once for all the

@@ -17,12 +17,20 @@ prior: PL_i = b_i + K_md,i * sigma, where b_i [m] is the largest bias on the axi
 through for that fault and K_md,i the one-sided quantile of the allowed missed-detection probability
 R_i / P_i (R_i the mode's share of the hourly risk, P_i its prior per hour). A mode whose prior is
 already below its share needs no coverage (P_i * 1 <= R_i).  PL = max(fault-free, every covered mode).
+
+The centre's bound on its own correction error (RTCM 4001, docs/correction-bound-message.md) enters as a
+variance inflation: the per-satellite overbound sigmas are carried to the axis by the solution's gain
+(`correction_sigma_on_axis`) and added in quadrature to the receiver's sigma before K is applied, in the
+fault-free and in every fault term. A satellite used without a bound (NaN) makes the PL infinite: the
+corrections are then unbounded, never exact (docs/decisions/0280-correction-error-bound.md).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+
+import numpy as np
 
 # Hourly integrity risk per axis (railway.md: Helmet, track discrimination and odometry correction).
 HOURLY_INTEGRITY_RISK = 1e-9
@@ -123,12 +131,16 @@ class IntegrityAllocation:
             return None
         return one_sided_k(r / mode.prior_per_hour)
 
-    def protection_level(self, sigma_m: float, axis: str) -> float:
-        """Protection level [m] on `axis` ('along' or 'cross') for a 1-sigma error `sigma_m`."""
+    def protection_level(self, sigma_m: float, axis: str, correction_sigma_m: float = 0.0) -> float:
+        """Protection level [m] on `axis` ('along' or 'cross') for a 1-sigma error `sigma_m`, inflated by the
+        centre's correction-error overbound sigma on that axis (`correction_sigma_on_axis`; 0: none sent)."""
         if axis not in ("along", "cross"):
             raise ValueError("axis must be 'along' or 'cross'")
-        if not math.isfinite(sigma_m):
+        if not math.isfinite(sigma_m) or not math.isfinite(correction_sigma_m):
             return math.inf
+        if correction_sigma_m < 0.0:
+            raise ValueError("correction sigma must be non-negative")
+        sigma_m = math.hypot(sigma_m, correction_sigma_m)  # independent of the receiver's own errors
         pl = self.k_fault_free * sigma_m
         for mode in self.faults:
             k = self.k_missed_detection(mode)
@@ -146,14 +158,35 @@ class AxisDecision:
     cross_available: bool  # track discrimination usable: cross-track PL within its alert limit
 
 
+def correction_sigma_on_axis(gain: np.ndarray, correction_sigma_m: np.ndarray) -> np.ndarray:
+    """Sigma [m] the centre's correction errors add on an axis: sum_j |g_j| sigma_j over the satellites' DDs.
+
+    `gain` (..., S): the axis row(s) of the solution's gain (position change per metre of each DD);
+    `correction_sigma_m` (S,) or (..., S): the 4001 overbound sigmas. The standard deviation of a sum is at
+    most the sum of the standard deviations (Minkowski), so no correlation between the DDs' correction
+    errors (they share the reference satellite and the interpolation) needs assuming. A satellite with a
+    non-zero gain and no bound (NaN) gives inf; one the solution does not use (gain 0) is ignored."""
+    g = np.abs(np.asarray(gain, dtype=float))
+    s = np.broadcast_to(np.asarray(correction_sigma_m, dtype=float), g.shape)
+    if np.any(s[np.isfinite(s)] < 0.0):
+        raise ValueError("correction sigmas must be non-negative")
+    used = g > 0.0
+    unbounded = (used & ~np.isfinite(s)).any(axis=-1)
+    return np.where(unbounded, np.inf, np.sum(np.where(used, g * np.where(np.isfinite(s), s, 0.0), 0.0),
+                                              axis=-1))
+
+
 def axis_availability(sigma_along_m: float, sigma_cross_m: float,
                       allocation: IntegrityAllocation | None = None,
                       along_alert_limit_m: float = ALONG_TRACK_ALERT_LIMIT_M,
-                      cross_alert_limit_m: float = CROSS_TRACK_ALERT_LIMIT_M) -> AxisDecision:
-    """Per-axis protection levels and availability, each against its own alert limit."""
+                      cross_alert_limit_m: float = CROSS_TRACK_ALERT_LIMIT_M,
+                      correction_sigma_along_m: float = 0.0,
+                      correction_sigma_cross_m: float = 0.0) -> AxisDecision:
+    """Per-axis protection levels and availability, each against its own alert limit; the centre's
+    correction-error sigma per axis (`correction_sigma_on_axis`) inflates each (0: no bound received)."""
     a = allocation or IntegrityAllocation()
-    apl = a.protection_level(sigma_along_m, "along")
-    xpl = a.protection_level(sigma_cross_m, "cross")
+    apl = a.protection_level(sigma_along_m, "along", correction_sigma_along_m)
+    xpl = a.protection_level(sigma_cross_m, "cross", correction_sigma_cross_m)
     return AxisDecision(apl, xpl, apl <= along_alert_limit_m, xpl <= cross_alert_limit_m)
 
 
