@@ -943,15 +943,18 @@ class RtkFilter:
 
     def _tight_ionosphere(self, dd: DDIndex, ep: _CommonEpoch) -> None:
         """The SD ionosphere states of this epoch's rows pulled to the quiet prior (zero, QUIET_SIGMA_M x M)."""
-        el = ep.zd_base.el
-        for k in np.unique(np.concatenate((dd.k, dd.ref))):
-            i = self.ion_state(ep.sats[k])
-            if i is None:
-                continue
-            var = ionosphere_prior.prior_variance(ionosphere_prior.QUIET_SIGMA_M, ionosphere_prior.mapping(el[k]))
-            H = np.zeros((1, len(self.x)))
-            H[0, i] = 1.0
-            self._kalman_update(np.array([-self.x[i]]), H, np.array([[var]]))
+        ks = np.unique(np.concatenate((dd.k, dd.ref)))
+        states = [self.ion_state(ep.sats[k]) for k in ks]
+        keep = np.array([i is not None for i in states], dtype=bool)
+        if not keep.any():
+            return
+        idx = np.array([i for i in states if i is not None])
+        var = ionosphere_prior.prior_variance(ionosphere_prior.QUIET_SIGMA_M,
+                                              ionosphere_prior.mapping(ep.zd_base.el[ks[keep]]))
+        # one update with independent rows: the same as one satellite at a time, in one product
+        H = np.zeros((len(idx), len(self.x)))
+        H[np.arange(len(idx)), idx] = 1.0
+        self._kalman_update(-self.x[idx], H, np.diag(np.broadcast_to(var, idx.shape).astype(float)))
 
     def _quiet_consistent(self, dd: DDIndex, ep: _CommonEpoch, rows: np.ndarray, attempt: "_FixAttempt") -> bool:
         """A quiet fix's own check: every fixed row's DD ionosphere within QUIET_CHECK_SIGMAS of the quiet prior."""
