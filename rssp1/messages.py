@@ -22,6 +22,9 @@ MESSAGE_VERSION = 1
 MESSAGE_HEADER = struct.Struct("<BBH")
 NO_SECTION = 0xFFFF  # section id meaning "the whole line"
 UNKNOWN_U16 = 0xFFFF
+UNKNOWN_U32 = 0xFFFFFFFF
+TRAIN_ID_BYTES = 20  # train and track names in SECTION_TRAINS: ASCII, NUL-padded
+TRACK_ID_BYTES = 16
 MAX_TEXT_BYTES = 80  # alarm text, ASCII; enough for an operator line, keeps a report inside one RSD
 
 
@@ -54,7 +57,16 @@ class MessageType(enum.IntEnum):
     CORRECTION_AGE = 0x03
     ALARM = 0x04
     RBC_ACK = 0x05
+    SECTION_TRAINS = 0x06
     VIRTUAL_BALISE = 0x10
+
+
+class TrainIntegrity(enum.IntEnum):
+    """Train integrity (the train is complete) as the onboard unit reports it."""
+
+    CONFIRMED = 0
+    LOST = 1
+    UNKNOWN = 2  # not monitored (no rear antenna / integrity device)
 
 
 @dataclass(frozen=True)
@@ -120,7 +132,36 @@ class VirtualBaliseTelegram:
     telegram_id: int  # u32, unique per passage across onboard restarts (random start); acked by id
 
 
-Message = IntegrityStatus | Exclusions | CorrectionAge | Alarm | RbcAck | VirtualBaliseTelegram
+@dataclass(frozen=True)
+class SectionTrain:
+    """One train of a section's queue (the centre's section register), in order front to rear."""
+
+    train_id: str  # ASCII, at most TRAIN_ID_BYTES
+    track: str  # ASCII, at most TRACK_ID_BYTES
+    chainage_mm: int  # front of the train (its antenna)
+    speed_mm_s: int
+    length_dm: int
+    integrity: TrainIntegrity
+    correction_age_ms: int = UNKNOWN_U32  # 0xFFFFFFFF: the position used no corrections
+    along_pl_cm: int = UNKNOWN_U16  # protection levels, centimetres; 0xFFFF unknown
+    cross_pl_cm: int = UNKNOWN_U16
+    hpl_cm: int = UNKNOWN_U16
+    report_ms: int = 0  # GPS time of the train's position report, ms
+
+
+@dataclass(frozen=True)
+class SectionTrains:
+    """The trains of one line section and direction in order, front (nearest the exit) first: state, sent
+    in turn every cycle; `version` counts the queue's changes of membership or order."""
+
+    epoch_ms: int  # GPS time the register held this picture, ms
+    section_id: int  # the section register's line section (between stations), not an integrity section
+    direction: int  # 0 up (increasing chainage), 1 down
+    version: int
+    trains: tuple[SectionTrain, ...]
+
+
+Message = IntegrityStatus | Exclusions | CorrectionAge | Alarm | RbcAck | SectionTrains | VirtualBaliseTelegram
 
 # ----------------------------------------------------------------- layouts (one source of truth)
 # type -> (fixed part, counted-list item or None). The fixed part's last field is the list count.
@@ -134,6 +175,8 @@ _ALARM_FIXED = struct.Struct("<QIHBHB")  # epoch_ms, alarm_id, code, severity, s
 _ACK_FIXED = struct.Struct("<IB")  # last_report_seq, n_alarm_ids
 _ACK_ITEM = struct.Struct("<I")
 _BALISE_FIXED = struct.Struct("<QIIHQBIIBI")
+_SECTION_FIXED = struct.Struct("<QHBIB")  # epoch_ms, section_id, direction, version, n_trains
+_SECTION_ITEM = struct.Struct(f"<{TRAIN_ID_BYTES}s{TRACK_ID_BYTES}sQIHBIHHHQ")  # SectionTrain's fields in order
 
 MESSAGE_LAYOUTS: dict[MessageType, tuple[struct.Struct, struct.Struct | None]] = {
     MessageType.INTEGRITY_STATUS: (_INTEGRITY_FIXED, _INTEGRITY_ITEM),
@@ -141,6 +184,7 @@ MESSAGE_LAYOUTS: dict[MessageType, tuple[struct.Struct, struct.Struct | None]] =
     MessageType.CORRECTION_AGE: (_AGE_FIXED, None),
     MessageType.ALARM: (_ALARM_FIXED, None),  # then text bytes
     MessageType.RBC_ACK: (_ACK_FIXED, _ACK_ITEM),
+    MessageType.SECTION_TRAINS: (_SECTION_FIXED, _SECTION_ITEM),
     MessageType.VIRTUAL_BALISE: (_BALISE_FIXED, None),
 }
 SATELLITE_SYSTEMS = b"GCERJ"
@@ -180,6 +224,16 @@ def encode_message(msg: Message) -> bytes:
             _ACK_ITEM.pack(a) for a in msg.alarm_ids
         )
         return _frame(MessageType.RBC_ACK, body)
+    if isinstance(msg, SectionTrains):
+        if len(msg.trains) > 0xFF or msg.direction not in (0, 1):
+            raise ValueError(f"section {msg.section_id}: {len(msg.trains)} trains, direction {msg.direction}")
+        body = _SECTION_FIXED.pack(msg.epoch_ms, msg.section_id, msg.direction, msg.version & 0xFFFFFFFF,
+                                   len(msg.trains)) + b"".join(
+            _SECTION_ITEM.pack(_ascii(t.train_id, TRAIN_ID_BYTES), _ascii(t.track, TRACK_ID_BYTES), t.chainage_mm,
+                               t.speed_mm_s, t.length_dm, int(t.integrity), t.correction_age_ms, t.along_pl_cm,
+                               t.cross_pl_cm, t.hpl_cm, t.report_ms)
+            for t in msg.trains)
+        return _frame(MessageType.SECTION_TRAINS, body)
     if isinstance(msg, VirtualBaliseTelegram):
         body = _BALISE_FIXED.pack(
             msg.time_ms, msg.train_id, msg.balise_group, msg.track_id, msg.chainage_mm, int(msg.reverse),
@@ -187,6 +241,20 @@ def encode_message(msg: Message) -> bytes:
         )
         return _frame(MessageType.VIRTUAL_BALISE, body)
     raise TypeError(f"not a message: {msg!r}")
+
+
+def _ascii(text: str, size: int) -> bytes:
+    b = text.encode("ascii")
+    if len(b) > size or b"\0" in b:
+        raise ValueError(f"{text!r}: at most {size} ASCII characters")
+    return b
+
+
+def _unpad(raw: bytes, what: str) -> str:
+    try:
+        return raw.rstrip(b"\0").decode("ascii")
+    except UnicodeDecodeError as exc:
+        raise MessageError("value", f"{what} is not ASCII") from exc
 
 
 def encode_payload(messages: list[Message] | tuple[Message, ...]) -> bytes:
@@ -251,6 +319,20 @@ def decode_message(msg_type: int, body: bytes) -> Message:
         last, n = values
         _exact(rest, n * _ACK_ITEM.size, kind.name)
         return RbcAck(last, tuple(_ACK_ITEM.unpack_from(rest, 4 * i)[0] for i in range(n)))
+    if kind is MessageType.SECTION_TRAINS:
+        epoch, section, direction, version, n = values
+        _exact(rest, n * _SECTION_ITEM.size, kind.name)
+        if direction not in (0, 1):
+            raise MessageError("value", f"direction {direction}")
+        trains = []
+        for i in range(n):
+            tid, track, ch, speed, length, integ, age, apl, cpl, hpl, rep = _SECTION_ITEM.unpack_from(rest, i * _SECTION_ITEM.size)
+            name = _unpad(tid, "train id")
+            if not name:
+                raise MessageError("value", "empty train id")
+            trains.append(SectionTrain(name, _unpad(track, "track"), ch, speed, length,
+                                       _enum(TrainIntegrity, integ, "train integrity"), age, apl, cpl, hpl, rep))
+        return SectionTrains(epoch, section, direction, version, tuple(trains))
     _exact(rest, 0, kind.name)
     t, train, group, track, chainage, reverse, conf, speed, integrity, telegram_id = values
     if reverse not in (0, 1):

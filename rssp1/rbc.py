@@ -41,6 +41,7 @@ from rssp1.messages import (
     RbcAck,
     SectionIntegrity,
     SectionStatus,
+    SectionTrains,
     Severity,
     decode_payload,
     encode_message,
@@ -52,6 +53,9 @@ AGE_UNKNOWN_MS = 0xFFFFFFFF  # no correction model yet
 MAX_ALARMS_PER_CYCLE = 8  # unacknowledged alarms carried per RSD; the rest wait their turn
 MAX_ACKED_IDS = 16  # alarm ids an RbcAck carries (the most recent)
 RECENT_ALARM_IDS = 1024  # alarm ids the RBC remembers for deduplication
+# RSD room a section's train telegram leaves for the integrity report (one line's sections, exclusions, age)
+# and a few alarms: a section whose telegram would not leave it is refused (split the section's trains)
+SECTION_TRAINS_RESERVE_BYTES = 256
 
 
 def _ms(seconds: float) -> int:
@@ -78,6 +82,8 @@ class CentreRbcLink:
         self.report_seq = 0
         self.last_acked_report = -1
         self.stats: Counter[str] = Counter()
+        self.section_trains: dict[tuple[int, int], bytes] = {}  # (section, direction) -> encoded SectionTrains
+        self._trains_turn = 0  # where this cycle's round of section-train telegrams starts
 
     # -- what the centre tells us
     def set_section(self, section_id: int, status: SectionStatus, hpl_m: float | None = None) -> None:
@@ -93,6 +99,14 @@ class CentreRbcLink:
     def set_exclusions(self, satellites: Iterable[str] = (), stations: Iterable[int] = ()) -> None:
         self.satellites = tuple(sorted(satellites))
         self.stations = tuple(sorted(stations))
+
+    def set_section_trains(self, msg: SectionTrains) -> None:
+        """The section register's picture of one section and direction (state: the newest replaces it;
+        every picture is carried in turn, as many per cycle as the RSD has room for after the report)."""
+        encoded = encode_message(msg)
+        if len(encoded) > MAX_RSD_DATA_BYTES - SECTION_TRAINS_RESERVE_BYTES:
+            raise ValueError(f"section {msg.section_id}: {len(msg.trains)} trains do not fit one RSD")
+        self.section_trains[(msg.section_id, msg.direction)] = encoded
 
     def corrections_updated(self, epoch_ms: int, produced_at_s: float) -> None:
         """A new correction model (epoch `epoch_ms`, GPS ms) was produced at `produced_at_s` (caller's clock)."""
@@ -130,9 +144,26 @@ class CentreRbcLink:
         while len(payload) > MAX_RSD_DATA_BYTES and alarms:  # long alarm texts: send fewer this cycle
             alarms.pop()
             payload = self._report(self.sections, self.satellites, self.stations, now_s, alarms)
+        payload += self._section_trains_turn(MAX_RSD_DATA_BYTES - len(payload))
         frames, events = self.endpoint.cycle(payload)
         self._count(events)
         return frames
+
+    def _section_trains_turn(self, room: int) -> bytes:
+        keys = sorted(self.section_trains)
+        if not keys:
+            return b""
+        out, sent = [], 0
+        for i in range(len(keys)):
+            m = self.section_trains[keys[(self._trains_turn + i) % len(keys)]]
+            if len(m) > room:
+                break
+            out.append(m)
+            room -= len(m)
+            sent += 1
+        self._trains_turn = (self._trains_turn + sent) % len(keys)
+        self.stats["section_trains_sent"] += sent
+        return b"".join(out)
 
     def receive(self, datagram: bytes, now_s: float | None = None) -> None:
         for event in self.endpoint.receive(datagram):
@@ -179,6 +210,7 @@ class RbcView:
     stations: tuple[int, ...] = ()
     correction_age_ms: int = AGE_UNKNOWN_MS
     report_cycle: int | None = None  # local cycle of the last integrity report
+    section_trains: dict[tuple[int, int], SectionTrains] = field(default_factory=dict)  # (section, direction)
 
 
 class RbcSimulator:
@@ -259,6 +291,12 @@ class RbcSimulator:
                 self._watchdog(AlarmCode.CORRECTION_STALE, msg.age_ms > limit, what)
             elif isinstance(msg, Exclusions):
                 self.view.satellites, self.view.stations = msg.satellites, msg.stations
+            elif isinstance(msg, SectionTrains):
+                key = (msg.section_id, msg.direction)
+                held = self.view.section_trains.get(key)
+                if held is None or msg.epoch_ms >= held.epoch_ms:  # a late frame never rolls the picture back
+                    self.view.section_trains[key] = msg
+                    self.stats["section_trains_received"] += 1
             elif isinstance(msg, Alarm):
                 if msg.alarm_id in self._seen_alarm_ids:
                     self._seen_alarm_ids.move_to_end(msg.alarm_id)  # ack it again: our ack may be lost
