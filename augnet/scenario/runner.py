@@ -206,6 +206,7 @@ class TrainLog:
     base_sats: list[int] = field(default_factory=list)  # satellites in the VRS epoch used
     vrs_master: list[str] = field(default_factory=list)  # the master station of the VRS epoch used
     track: list[str] = field(default_factory=list)  # matched track ('' when none)
+    km: list[float] = field(default_factory=list)  # matched chainage [km] (NaN when none)
     confirmed: list[bool] = field(default_factory=list)
     along_pl_m: list[float] = field(default_factory=list)
     cross_pl_m: list[float] = field(default_factory=list)
@@ -530,6 +531,7 @@ class Chain:
         log.vrs_master.append(self._vrs_master.get(round(tr.base.time, 3), {}).get(log.id, "")
                               if tr.base is not None else "")
         log.track.append(m.track if (m is not None and m.track) else "")
+        log.km.append(float(m.km) if (m is not None and m.track) else math.nan)
         log.confirmed.append(bool(m is not None and m.confirmed))
         log.along_pl_m.append(m.along_pl_m if m is not None else math.inf)
         log.cross_pl_m.append(m.cross_pl_m if m is not None else math.inf)

@@ -170,3 +170,28 @@ class QualitySample(Base):
     residual_rms_m: Mapped[float | None] = mapped_column(Float, default=None)
     satellites: Mapped[int] = mapped_column(Integer, default=0)
     __table_args__ = (UniqueConstraint("at", "subject", name="uq_quality_at_subject"),)
+
+
+class SectionTrain(Base):
+    """The section register's picture (augnet.system.section_register): one row per train in a line section,
+    `position` 0 the front (nearest the section's exit) in its direction. Rewritten per section and direction
+    when the running system's register changes; the console reads it when no system runs in its process."""
+
+    __tablename__ = "section_trains"
+    id: Mapped[int] = mapped_column(primary_key=True)
+    section_id: Mapped[int] = mapped_column(Integer)
+    direction: Mapped[str] = mapped_column(String(8))  # up / down
+    position: Mapped[int] = mapped_column(Integer)
+    train_code: Mapped[str] = mapped_column(String(32), unique=True)  # a train is in one place
+    track: Mapped[str] = mapped_column(String(32), default="")
+    km: Mapped[float] = mapped_column(Float)
+    speed_m_s: Mapped[float] = mapped_column(Float)
+    length_m: Mapped[float] = mapped_column(Float)
+    integrity: Mapped[str] = mapped_column(String(16))
+    correction_age_s: Mapped[float | None] = mapped_column(Float, default=None)
+    along_pl_m: Mapped[float | None] = mapped_column(Float, default=None)
+    cross_pl_m: Mapped[float | None] = mapped_column(Float, default=None)
+    hpl_m: Mapped[float | None] = mapped_column(Float, default=None)
+    report_time_s: Mapped[float] = mapped_column(Float, default=0.0)  # GPS time of the train's report
+    updated_at: Mapped[dt.datetime] = mapped_column(default=utcnow)
+    __table_args__ = (UniqueConstraint("section_id", "direction", "position", name="uq_section_trains_place"),)

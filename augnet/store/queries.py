@@ -20,6 +20,7 @@ from augnet.store.models import (
     Operator,
     QualitySample,
     Role,
+    SectionTrain,
     Severity,
     Station,
     Train,
@@ -396,3 +397,35 @@ def train_sessions(session: Session, code: str, limit: int = 50) -> list[TrainSe
     """A train's most recent correction-service sessions, newest first (empty for an unknown train)."""
     return list(session.scalars(select(TrainSession).join(Train).where(Train.code == code)
                                 .order_by(TrainSession.started_at.desc(), TrainSession.id.desc()).limit(limit)))
+
+
+# --- the section register (augnet.system.section_register) ---------------------------------------------
+
+def replace_section_trains(session: Session, section_id: int, direction: str, records: list[dict]) -> None:
+    """One section and direction's trains, front first (`TrainRecord` fields as a dict), in place of the
+    stored ones; a train stored in another section moved from there (it is in one place)."""
+    codes = [r["train_id"] for r in records]
+    session.execute(delete(SectionTrain).where(
+        (SectionTrain.section_id == section_id) & (SectionTrain.direction == direction)))
+    if codes:
+        session.execute(delete(SectionTrain).where(SectionTrain.train_code.in_(codes)))
+    session.flush()
+    for i, r in enumerate(records):
+        session.add(SectionTrain(section_id=section_id, direction=direction, position=i, train_code=r["train_id"],
+                                 track=r["track"], km=r["km"], speed_m_s=r["speed_m_s"], length_m=r["length_m"],
+                                 integrity=r["integrity"], correction_age_s=r["correction_age_s"],
+                                 along_pl_m=r["along_pl_m"], cross_pl_m=r["cross_pl_m"], hpl_m=r["hpl_m"],
+                                 report_time_s=r["time_s"]))
+
+
+def section_trains(session: Session) -> dict[tuple[int, str], list[dict]]:
+    """The stored register: (section, direction) -> trains front first."""
+    out: dict[tuple[int, str], list[dict]] = {}
+    rows = session.scalars(select(SectionTrain).order_by(SectionTrain.section_id, SectionTrain.direction,
+                                                         SectionTrain.position))
+    for r in rows:
+        out.setdefault((r.section_id, r.direction), []).append(
+            {"train_id": r.train_code, "track": r.track, "km": r.km, "speed_m_s": r.speed_m_s, "length_m": r.length_m,
+             "integrity": r.integrity, "correction_age_s": r.correction_age_s, "along_pl_m": r.along_pl_m,
+             "cross_pl_m": r.cross_pl_m, "hpl_m": r.hpl_m, "time_s": r.report_time_s})
+    return out

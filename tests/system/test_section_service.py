@@ -1,0 +1,130 @@
+"""The centre's section service from position reports: codec, transitions through stations, overtaking on
+a loop track, refusals alarmed, the RSSP-I picture (synthetic reports on a stepped GPS clock)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from augnet.onboard.position_report import (REPORT_BYTES, PositionReport, ReportBuilder, ReportError, decode,
+                                            encode)
+from augnet.system.section_register import Authority
+from augnet.system.section_service import SectionService, StationArea, record_of
+
+T0 = 1_400_000_000.0
+
+
+def report(tid, t, km, track="L1-1", direction="up", seq=1, **kw):
+    base = dict(train_id=tid, seq=seq, time_s=T0 + t, track=track, km=km, direction=direction, speed_m_s=50.0,
+                length_m=209.0, integrity="unknown", correction_age_s=0.9, along_pl_m=0.4, cross_pl_m=0.3,
+                hpl_m=0.5, vpl_m=0.9, track_confirmed=True)
+    base.update(kw)
+    return PositionReport(**base)
+
+
+def test_report_round_trip_and_refusals():
+    r = report("G101", 10.0, 80.123456, correction_age_s=None, hpl_m=None)
+    data = encode(r)
+    assert len(data) == REPORT_BYTES and decode(data) == r
+    for bad, what in [(data[:-1], "length"), (data[:-4] + b"\0\0\0\0", "crc32"),
+                      (b"XX" + data[2:], "crc32")]:
+        with pytest.raises(ReportError, match=what):
+            decode(bad)
+    with pytest.raises(ReportError):
+        encode(dataclasses.replace(r, train_id="X" * 21))
+    with pytest.raises(ReportError):
+        encode(dataclasses.replace(r, direction="north"))
+
+
+def test_builder_takes_direction_and_speed_from_the_chainage():
+    b = ReportBuilder("G1", 209.0)
+    kw = dict(correction_age_s=None, along_pl_m=None, cross_pl_m=None, hpl_m=None, vpl_m=None, track_confirmed=False)
+    assert b.build(T0, "L1-2", 100.0, **kw).direction == "unknown"
+    assert b.build(T0 + 1, "L1-2", 100.0005, **kw).direction == "unknown"  # 0.5 m: noise, not a direction
+    r = b.build(T0 + 2, "L1-2", 99.9165, **kw)
+    assert r.direction == "down" and r.speed_m_s == pytest.approx(84.0, abs=0.1) and r.seq == 3
+
+
+@pytest.fixture
+def svc():
+    alarms = []
+    audits = []
+    s = SectionService([StationArea("A", 50.0, 52.0), StationArea("B", 100.0, 102.0)], 150.0,
+                       on_alarm=lambda *a: alarms.append(a), on_audit=audits.append)
+    s.alarms, s.audits = alarms, audits
+    return s
+
+
+def order(svc, sid, d="up"):
+    return [r.train_id for r in svc.register.trains(sid, d)]
+
+
+def test_start_of_mission_then_through_a_station(svc):
+    svc.on_datagram(encode(report("T1", 0, 45.0)))
+    assert order(svc, 1) == ["T1"] and svc.audits[0].action == "section.admit"
+    svc.on_report(report("T1", 1, 50.05))  # past the exit: B? no, A removes it
+    assert svc.register.where("T1") is None and svc.in_station["T1"] == ("A", "L1-1")
+    svc.on_report(report("T1", 2, 51.0, track="L1-S1-1"))
+    svc.on_report(report("T1", 3, 52.1))
+    assert order(svc, 2) == ["T1"]
+    kinds = [(e.action, e.section_id, e.by) for e in svc.events]
+    assert kinds == [("admit", 1, "start-of-mission"), ("remove", 1, "A"), ("insert", 2, "A")]
+    assert svc.alarms == []
+
+
+def test_overtaking_on_a_loop_track(svc):
+    """S (slow) and F (fast) leave A in that order; at B S waits on loop track L1-S2-1 while F passes on
+    the main track: section 3's order is F, S."""
+    svc.on_report(report("S", 0, 51.0))  # both start in station A
+    svc.on_report(report("F", 0, 50.5))
+    svc.on_report(report("S", 1, 52.2))
+    svc.on_report(report("F", 60, 52.1))
+    assert order(svc, 2) == ["S", "F"]
+    svc.on_report(report("S", 100, 99.0))
+    svc.on_report(report("F", 100, 98.0))
+    svc.on_report(report("S", 110, 100.3, track="L1-S2-1"))  # S into the station, onto the loop
+    svc.on_report(report("F", 110, 100.2))
+    svc.on_report(report("S", 120, 101.0, track="L1-S2-1", speed_m_s=0.0))  # standing on the loop
+    svc.on_report(report("F", 130, 102.3))  # F leaves B first
+    svc.on_report(report("S", 200, 102.2))
+    assert order(svc, 3) == ["F", "S"]
+    assert [e.by for e in svc.events if e.action == "insert" and e.section_id == 3] == ["B", "B"]
+    assert not any(k.startswith("refused") for k in svc.stats)
+
+
+def test_refusals_alarmed_once_and_cleared(svc):
+    svc.on_report(report("T1", 0, 60.0))
+    svc.on_report(report("T2", 0, 55.0))
+    svc.on_report(report("T2", 1, 61.0))  # a report putting T2 ahead of T1: refused, order kept
+    svc.on_report(report("T2", 2, 61.5))
+    assert order(svc, 2) == ["T1", "T2"] and svc.stats["refused_order-conflict"] == 2
+    assert [a[0] for a in svc.alarms] == ["section-register-refused"] and not svc.alarms[0][4]
+    svc.on_report(report("T2", 3, 59.0))
+    assert svc.alarms[-1][4] is True  # cleared by the next accepted report
+    svc.on_report(report("T1", 4, 59.5, seq=2, time_s=T0 - 5))  # older than the last: dropped
+    assert svc.stats["stale_reports"] == 1
+    svc.on_datagram(b"garbage")
+    assert svc.stats["bad_reports"] == 1
+
+
+def test_without_start_authority_a_train_waits_for_a_dispatcher():
+    svc = SectionService([StationArea("A", 50.0, 52.0)], 100.0, start_authority=None)
+    svc.on_report(report("T1", 0, 70.0))
+    assert svc.register.where("T1") is None and svc.stats["waiting_for_admission"] == 1
+    audit = svc.register.admit(2, "up", record_of(report("T1", 0, 70.0)), Authority("dora", "dispatcher"),
+                               "train identified by the driver")
+    assert audit.after == ("T1",)
+
+
+def test_telegram_and_dirty_sections(svc):
+    assert len(svc.take_dirty()) == 6  # every section and direction at the first flush
+    svc.on_report(report("T1", 0, 60.0, correction_age_s=None, along_pl_m=None))
+    assert svc.take_dirty() == [(2, "up")]
+    assert svc.take_dirty() == []
+    m = svc.telegram(2, "up", 123)
+    (t,) = m.trains
+    assert (m.section_id, m.direction, t.train_id, t.chainage_mm, t.length_dm) == (2, 0, "T1", 60_000_000, 2090)
+    assert t.correction_age_ms == 0xFFFFFFFF and t.along_pl_cm == 0xFFFF and t.cross_pl_cm == 30
+    audit = svc.reorder(2, "up", ["T1"], Authority("dora", "dispatcher"), "check")
+    assert audit.action == "section.reorder" and svc.take_dirty() == [(2, "up")]
