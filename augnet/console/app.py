@@ -7,6 +7,7 @@ Routes (OpenAPI at /openapi.json, interactive docs at /docs):
   /api/stations         registry + live state; add / edit (admin), enable / disable (operator)
   /api/network, /api/network/baselines, /api/line
   /api/trains, /api/trains/{id}
+  /api/sections, /api/sections/{id}/{up|down}, .../reorder (operator: the dispatcher's order; audited)
   /api/alarms, /api/alarms/{id}, /api/alarms/{id}/acknowledge (operator)
   /api/caster, /api/caster/mountpoints, /api/caster/clients, /api/caster/users (changes: admin)
   /api/quality, /api/history/series (the charts' downsampled quality history), /api/audit
@@ -39,6 +40,7 @@ from augnet.console.limits import MAX_BODY_BYTES, BodyLimitMiddleware
 from augnet.console.live import LiveState, json_safe
 from augnet.console.metrics import MetricsMiddleware, RequestMetrics
 from augnet.console.routers import alarms, auth, caster, history, network, operators, page, stations, trains
+from augnet.console.routers import sections as section_routes
 from augnet.console.routers import live as live_feed
 from augnet.console.routers.page import STATIC_DIR
 from augnet.console.throttle import LoginThrottle
@@ -51,14 +53,15 @@ ERROR_FIELDS_DROPPED = frozenset({"input", "url"})
 
 def create_app(sessions: sessionmaker[Session], live: LiveState | None = None, *,
                clock: Callable[[], float] = time.monotonic, max_body_bytes: int = MAX_BODY_BYTES,
-               allowed_origins: tuple[str, ...] = (), bus=None) -> FastAPI:
+               allowed_origins: tuple[str, ...] = (), bus=None, sections=None) -> FastAPI:
     """The console over a store (`augnet.store.open_store(url)`) and, when a system runs in this process,
     its live state. Without one the live sections are empty.
 
     `clock` times the login throttle (tests step it); `allowed_origins` are browser origins besides the
     console's own that may open the live websocket (e.g. "https://console.example.org" behind a proxy);
     `bus` (an `augnet.bus.Bus` on this app's event loop) carries caster user and mountpoint changes to the
-    casters (routers/caster.py)."""
+    casters (routers/caster.py); `sections` (an `augnet.system.section_service.SectionService` on this app's
+    event loop) is the running section register (routers/sections.py; without it the store's last picture)."""
     app = FastAPI(title="augnet console", version="1.0",
                   description="Operator console of the track-side GNSS augmentation network.")
     app.state.sessions = sessions
@@ -69,8 +72,9 @@ def create_app(sessions: sessionmaker[Session], live: LiveState | None = None, *
     app.state.login_throttle = LoginThrottle()
     app.state.allowed_origins = frozenset(o.rstrip("/").lower() for o in allowed_origins)
     app.state.bus = bus
+    app.state.sections = sections
 
-    for module in (auth, operators, stations, network, trains, alarms, caster, history, live_feed):
+    for module in (auth, operators, stations, network, trains, section_routes, alarms, caster, history, live_feed):
         app.include_router(module.router, prefix=API_PREFIX)
     app.include_router(page.router)
     app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")

@@ -171,6 +171,9 @@ class RbcConnection:
             counts[self.rbc.effective_status(sid).name] += 1
         return {"link_up": self.centre.is_up, "rbc_fresh": self.rbc.fresh, "sections": counts,
                 "rbc_alarms": len(self.rbc.alarms),
+                # the section register's pictures the RBC holds (SECTION_TRAINS) and the trains in them
+                "section_trains": {"pictures": len(self.rbc.view.section_trains),
+                                   "trains": sum(len(m.trains) for m in self.rbc.view.section_trains.values())},
                 "last_rbc_alarm": (self.rbc.alarms[-1].code.name if self.rbc.alarms else None)}
 
     async def stop(self) -> None:

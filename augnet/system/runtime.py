@@ -31,6 +31,7 @@ from dataclasses import replace
 from augnet.centre.engine import SUBJECT_ALARMS, EpochReport
 from augnet.gnss import time as gtime
 from augnet.onboard.trackmap import TrackDatabase
+from augnet.store import queries as store_queries
 from augnet.system import persistence
 from augnet.system.centre_service import CentreService, CentreSpec
 from augnet.system.history_series import series_values
@@ -85,6 +86,11 @@ class System:
         self.trains: dict[str, OnboardTrain] = {}
         self.train_watch = TrainCorrectionWatch()  # a train's stale corrections are an operator's alarm
         self.train_sessions: dict[str, int] = {}
+        self.sections = None  # SectionService: the trains per line section, from their position reports
+        self._section_rx = None  # its UDP endpoint (the trains' radio link)
+        self.reporters: dict = {}  # train id -> TrainReporter
+        self._senders: list = []
+        self._section_address = None
         self._tasks: list[asyncio.Task] = []
 
     # --- start-up, one step per part in the order the data flows ----------------------------------------
@@ -106,6 +112,7 @@ class System:
         await self.caster_access.start()  # from here on the console's changes reach the caster
         await self.station_sync.start()  # ... and the registry's reach the network
         await self._start_rbc(stations)
+        await self._start_sections(sc)
         await self._start_console(records)
         self._start_trains(sc, train_rx, port)
         self._start_stations(sc, port)  # last: they feed everything above
@@ -201,6 +208,51 @@ class System:
         self.rbc = RbcConnection(plan, {rx.id: rx.rtcm_id for rx in stations}, on_alarm=self._alarm)
         await self.rbc.start(self.settings.host)
 
+    async def _start_sections(self, sc: Scenario) -> None:
+        """The section register (decision 0292): the trains' position reports in over UDP, its picture to
+        the store and the RBC every `SECTION_FLUSH_S`."""
+        if self.world.track is None:
+            return
+        from augnet.scenario.sections import stations_of
+        from augnet.system.section_service import SectionService, open_receiver
+
+        self.sections = SectionService(stations_of(sc), self.world.track.length_m / 1000.0,
+                                       on_audit=self._section_audit, on_alarm=self._alarm)
+        self._section_rx, self._section_address = await open_receiver(self.sections, LOCALHOST)
+        self._tasks.append(asyncio.ensure_future(self._flush_sections()))
+
+    def _section_audit(self, a) -> None:
+        self.writer.submit(lambda db: store_queries.audit(
+            db, a.actor, a.action, a.target, reason=a.reason, before=list(a.before), after=list(a.after)))
+
+    async def _flush_sections(self) -> None:
+        from augnet.system.section_service import SECTION_FLUSH_S
+
+        while not self.stop_event.is_set():
+            await asyncio.sleep(SECTION_FLUSH_S)
+            try:
+                self.flush_sections()
+            except Exception:  # noqa: BLE001 - the store's or the link's trouble must not stop the register
+                log.exception("section register flush failed")
+
+    def flush_sections(self) -> None:
+        """The sections changed since the last flush: to the RBC (SECTION_TRAINS) and to the store."""
+        epoch_ms = int(round(gtime.now_gpst() * 1000))
+        for sid, d in self.sections.take_dirty():
+            if self.rbc is not None:
+                self.rbc.centre.set_section_trains(self.sections.telegram(sid, d, epoch_ms))
+            recs = self.sections.records(sid, d)
+            self.writer.submit(lambda db, sid=sid, d=d, recs=recs:
+                               store_queries.replace_section_trains(db, sid, d, recs))
+
+    async def _start_reporter(self, tr: OnboardTrain) -> None:
+        """The train's radio link to the centre's section register."""
+        from augnet.system.section_service import TrainReporter, open_sender
+
+        sender = await open_sender(self._section_address)
+        self.reporters[tr.id] = TrainReporter(tr, sender.send)
+        self._senders.append(sender)
+
     async def _start_console(self, records) -> None:
         """The live state (whenever the console package is installed), then the console serving it."""
         self.publisher.live = make_live_state(
@@ -214,7 +266,7 @@ class System:
         from augnet.console.app import create_app
 
         self.admin_token = await asyncio.get_running_loop().run_in_executor(None, self._console_admin_token)
-        app = create_app(self.sessions, self.publisher.live, bus=self.bus)
+        app = create_app(self.sessions, self.publisher.live, bus=self.bus, sections=self.sections)
 
         class _EmbeddedServer(uvicorn.Server):
             @contextlib.contextmanager
@@ -262,6 +314,8 @@ class System:
                 log.warning("train %s: no source mountpoint %s in the store", rx.id, mountpoint_of("train", rx.id))
             tr.start()
             self.trains[rx.id] = tr
+            if self.sections is not None:
+                self._tasks.append(asyncio.ensure_future(self._start_reporter(tr)))
             sid_future = self.writer.submit(lambda db, code=rx.id: persistence.open_train_session(db, code, VRS_MOUNT))
             sid_future.add_done_callback(lambda f, code=rx.id: self.train_sessions.__setitem__(code, f.result()))
 
@@ -341,6 +395,9 @@ class System:
 
     def _on_train_output(self, train: OnboardTrain, out) -> None:
         self.publisher.publish_train(train, out)
+        reporter = self.reporters.get(train.id)
+        if reporter is not None:
+            reporter.on_output(out)
         newest = train.last_base.time if train.last_base is not None else None
         for event in self.train_watch.check(train.id, newest, gtime.now_gpst()):
             self._alarm(*event)
@@ -387,6 +444,12 @@ class System:
         the store writer last, once every part's final write is queued."""
         self.stop_event.set()
         await self._stop_trains()
+        for sender in self._senders:
+            sender.close()
+        if self._section_rx is not None:
+            self._section_rx.close()
+        if self.sections is not None and self.writer is not None:
+            self.flush_sections()  # the register's last picture into the store
         if self.console_server is not None:
             self.console_server.should_exit = True
         if self.rbc is not None:

@@ -27,7 +27,8 @@ import logging
 from dataclasses import dataclass
 from typing import Callable
 
-from augnet.onboard.position_report import PositionReport, ReportError, decode
+from augnet.onboard.position_report import (DEFAULT_TRAIN_LENGTH_M, PositionReport, ReportBuilder, ReportError,
+                                            decode, encode)
 from augnet.system.section_register import (BOUNDARY_ZONE_M, DIRECTIONS, LINE_END, AuditRecord, Authority,
                                             LineSection, RegisterError, SectionRegister, TrainRecord, line_sections)
 from rssp1.messages import UNKNOWN_U16, UNKNOWN_U32, SectionTrain, SectionTrains, TrainIntegrity
@@ -271,3 +272,31 @@ async def open_sender(address) -> ReportSender:
     loop = asyncio.get_running_loop()
     _t, proto = await loop.create_datagram_endpoint(ReportSender, remote_addr=address)
     return proto
+
+
+REPORT_INTERVAL_S = 1.0  # a train reports its position once a second (the demo's 1 Hz PVT)
+
+
+class TrainReporter:
+    """A train's radio link to the centre: each output with a track position becomes one report datagram
+    (at most every REPORT_INTERVAL_S of GPS time). `train` is an `OnboardTrain`, `send` one datagram."""
+
+    def __init__(self, train, send: Callable[[bytes], None], length_m: float | None = None):
+        self.train = train
+        self.send = send
+        self.builder = ReportBuilder(train.id, length_m or DEFAULT_TRAIN_LENGTH_M)
+        self._last_t = -float("inf")
+        self.sent = 0
+
+    def on_output(self, out) -> None:
+        m = out.match
+        t = float(out.solution.time)
+        if m is None or not m.track or t - self._last_t < REPORT_INTERVAL_S - 1e-6:
+            return
+        self._last_t = t
+        hpl, vpl = self.train.protection_levels()
+        r = self.builder.build(t, m.track, float(m.km), correction_age_s=self.train.correction_age_s(),
+                               along_pl_m=m.along_pl_m, cross_pl_m=m.cross_pl_m, hpl_m=hpl, vpl_m=vpl,
+                               track_confirmed=bool(m.confirmed))
+        self.send(encode(r))
+        self.sent += 1
