@@ -10,6 +10,7 @@ const WS_RETRY_MS = 5000;             // then try the websocket again
 const ALARM_REFRESH_MS = 2000;        // alarms are raised in the store by the system: poll them
 const STATIONS_REFRESH_MS = 5000;     // registry and along-track positions of stations
 const AUDIT_ROWS = 15;
+const SECTIONS_REFRESH_MS = 2000;     // the section register (/api/sections): its changes reach the store every 1 s
 const SVG_NS = "http://www.w3.org/2000/svg";
 const DIAGRAM = { left: 40, right: 960, trackY: 150, stationY: 168, trainY: 132, baselineTopY: 20, labelGapPx: 36 };
 const ROLE_RANK = { viewer: 0, operator: 1, admin: 2 };
@@ -30,6 +31,7 @@ const state = {
   dirty: new Set(),      // what changed since the last frame: "trains" alone is the frequent case
   geo: null,             // the map's projection (geoProjection), from the stations and the line
   history: null,         // the last /api/history/series answer
+  sections: null,        // the last /api/sections answer
   historyTimer: null,
 };
 
@@ -203,6 +205,73 @@ async function refreshAudit() {
       return tr;
     }));
   } catch (e) { console.warn(e); }
+}
+
+async function refreshSections() {
+  try { state.sections = await api("GET", "/api/sections"); renderSections(); } catch (e) { console.warn(e); }
+}
+
+// The dispatcher's action: train `tid` one place towards the exit (swapped with the train ahead).
+async function moveAhead(sec, tid) {
+  const reason = $("section-reason").value.trim();
+  $("section-error").textContent = "";
+  if (!reason) { $("section-error").textContent = "a reorder needs a reason"; return; }
+  const order = sec.trains.map((t) => t.train_id);
+  const i = order.indexOf(tid);
+  if (i <= 0) return;
+  [order[i - 1], order[i]] = [order[i], order[i - 1]];
+  try {
+    await api("POST", "/api/sections/" + sec.section + "/" + sec.direction + "/reorder", { order, reason });
+    $("section-reason").value = "";
+  } catch (e) { $("section-error").textContent = String(e); }
+  await Promise.all([refreshSections(), refreshAudit()]);
+}
+
+function renderSections() {
+  const s = state.sections;
+  if (!s) return;
+  const total = s.sections.reduce((n, x) => n + x.trains.length, 0);
+  $("sections-caption").textContent = "(" + total + " trains in " + s.sections.length / 2 + " sections" +
+    (s.live ? "" : ", stored picture") + ")";
+  const rows = [];
+  for (const dir of ["up", "down"]) {
+    const row = el("div", { class: "section-row", "data-direction": dir });
+    row.append(el("span", { class: "section-dir" }, dir === "up" ? "up \u2192" : "\u2190 down"));
+    const secs = s.sections.filter((x) => x.direction === dir).sort((a, b) => a.section - b.section);
+    secs.forEach((sec) => {
+      const st = (s.stations || []).find((x) => sec.km_begin != null && Math.abs(x.km_end - sec.km_begin) < 1e-6);
+      if (st) {
+        const inside = Object.entries(s.in_station || {}).filter(([, v]) => v.station === st.name).map(([t]) => t);
+        row.append(el("span", { class: "section-station", "data-station": st.name },
+          st.name + (inside.length ? " [" + inside.join(", ") + "]" : "")));
+      }
+      const box = el("div", { class: "section-box", "data-section": String(sec.section), "data-direction": dir });
+      const km = sec.km_begin == null ? "" : " km " + fmt(sec.km_begin, 1) + "\u2013" + fmt(sec.km_end, 1);
+      box.append(el("div", { class: "section-name" }, "S" + sec.section + km));
+      const list = el("ol", { class: "section-trains" });
+      // drawn in the direction of travel: up runs left to right, so its front train is drawn last
+      const drawn = dir === "up" ? [...sec.trains].reverse() : sec.trains;
+      for (const t of drawn) {
+        const pos = sec.trains.indexOf(t);
+        const li = el("li", { class: "section-train", "data-train": t.train_id, "data-position": String(pos),
+          title: "track " + t.track + ", " + fmt(t.speed_m_s * 3.6, 0) + " km/h, length " + fmt(t.length_m, 0) +
+            " m, integrity " + t.integrity + ", corr. age " + fmt(t.correction_age_s, 1) + " s, PL along " +
+            fmt(t.along_pl_m, 2) + " / cross " + fmt(t.cross_pl_m, 2) + " m" });
+        li.append(el("span", { class: "train-id" }, t.train_id), el("span", { class: "muted" }, " km " + fmt(t.km, 3)));
+        if (pos > 0 && canOperate() && s.live) {
+          const b = el("button", { type: "button", class: "move-ahead", "data-train": t.train_id,
+            title: "dispatcher: move one place towards the exit" }, "ahead");
+          b.addEventListener("click", () => moveAhead(sec, t.train_id));
+          li.append(b);
+        }
+        list.append(li);
+      }
+      box.append(list);
+      row.append(box);
+    });
+    rows.push(row);
+  }
+  $("sections").replaceChildren(...rows);
 }
 
 async function acknowledge(id, button) {
@@ -719,7 +788,7 @@ async function start() {
   try { state.me = await api("GET", "/api/auth/me"); } catch (e) { return; }
   $("login").hidden = true; $("main").hidden = false; $("logout").hidden = false;
   $("whoami").textContent = state.me.name + " (" + state.me.role + ")";
-  await Promise.all([refreshStations(), refreshAlarms(), refreshAudit(), refreshHistory()]);
+  await Promise.all([refreshStations(), refreshAlarms(), refreshAudit(), refreshHistory(), refreshSections()]);
   connectFeed();
 }
 
@@ -732,6 +801,7 @@ function boot() {
   if (m) history.replaceState(null, "", location.pathname);
   setInterval(() => { if (state.me) refreshAlarms(); }, ALARM_REFRESH_MS);
   setInterval(() => { if (state.me) refreshStations(); }, STATIONS_REFRESH_MS);
+  setInterval(() => { if (state.me) refreshSections(); }, SECTIONS_REFRESH_MS);
   $("history-window").addEventListener("change", () => { if (state.me) refreshHistory(); });
   setInterval(() => { if (state.me) renderTrains(); }, POLL_INTERVAL_MS);  // keeps "updated s ago" honest
   if (m) adopt(decodeURIComponent(m[1]));
