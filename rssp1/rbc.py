@@ -84,6 +84,7 @@ class CentreRbcLink:
         self.stats: Counter[str] = Counter()
         self.section_trains: dict[tuple[int, int], bytes] = {}  # (section, direction) -> encoded SectionTrains
         self._trains_turn = 0  # where this cycle's round of section-train telegrams starts
+        self._trains_changed: OrderedDict[tuple[int, int], None] = OrderedDict()  # sent first, oldest change first
 
     # -- what the centre tells us
     def set_section(self, section_id: int, status: SectionStatus, hpl_m: float | None = None) -> None:
@@ -101,12 +102,15 @@ class CentreRbcLink:
         self.stations = tuple(sorted(stations))
 
     def set_section_trains(self, msg: SectionTrains) -> None:
-        """The section register's picture of one section and direction (state: the newest replaces it;
-        every picture is carried in turn, as many per cycle as the RSD has room for after the report)."""
+        """The section register's picture of one section and direction (state: the newest replaces it).
+        Each cycle carries, in the RSD's room after the report, the changed pictures first (oldest change
+        first), then the others in turn: a change reaches the RBC in the next cycle it fits in."""
         encoded = encode_message(msg)
         if len(encoded) > MAX_RSD_DATA_BYTES - SECTION_TRAINS_RESERVE_BYTES:
             raise ValueError(f"section {msg.section_id}: {len(msg.trains)} trains do not fit one RSD")
-        self.section_trains[(msg.section_id, msg.direction)] = encoded
+        key = (msg.section_id, msg.direction)
+        self.section_trains[key] = encoded
+        self._trains_changed[key] = None
 
     def corrections_updated(self, epoch_ms: int, produced_at_s: float) -> None:
         """A new correction model (epoch `epoch_ms`, GPS ms) was produced at `produced_at_s` (caller's clock)."""
@@ -153,8 +157,19 @@ class CentreRbcLink:
         keys = sorted(self.section_trains)
         if not keys:
             return b""
-        out, sent = [], 0
+        out, sent, done = [], 0, set()
+        for key in list(self._trains_changed):
+            m = self.section_trains[key]
+            if len(m) > room:
+                break
+            out.append(m)
+            room -= len(m)
+            done.add(key)
+            del self._trains_changed[key]
         for i in range(len(keys)):
+            if keys[(self._trains_turn + i) % len(keys)] in done:
+                sent += 1
+                continue
             m = self.section_trains[keys[(self._trains_turn + i) % len(keys)]]
             if len(m) > room:
                 break
@@ -162,7 +177,7 @@ class CentreRbcLink:
             room -= len(m)
             sent += 1
         self._trains_turn = (self._trains_turn + sent) % len(keys)
-        self.stats["section_trains_sent"] += sent
+        self.stats["section_trains_sent"] += len(out)
         return b"".join(out)
 
     def receive(self, datagram: bytes, now_s: float | None = None) -> None:

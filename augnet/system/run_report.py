@@ -36,6 +36,7 @@ class RunReport:
     rbc: dict = field(default_factory=dict)
     caster: dict = field(default_factory=dict)
     store: dict = field(default_factory=dict)
+    sections: dict = field(default_factory=dict)  # the section register (SectionService.report)
 
     def to_json(self) -> str:
         return json.dumps(self.__dict__, indent=2, default=str)

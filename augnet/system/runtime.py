@@ -483,13 +483,17 @@ class System:
 
     def summary(self) -> RunReport:
         """The run report as of now (`run_report.py`)."""
-        return run_report(
+        rep = run_report(
             self.settings.scenario, self.started, time.time(), centre=self.centre, trains=self.trains,
             alarms=self.alarms.log if self.alarms is not None else [],
             rbc_snapshot=self.rbc.snapshot() if self.rbc else None,
             caster_snapshot=self.caster.snapshot(clients=False) if self.caster is not None else None,
             store_counts=({"writes": self.writer.writes, "failures": self.writer.failures}
                           if self.writer is not None else None))
+        if self.sections is not None:
+            rep.sections = self.sections.report()
+            rep.sections["reports_sent"] = {tid: r.sent for tid, r in self.reporters.items()}
+        return rep
 
 
 __all__ = ["System", "SystemSettings", "RunReport", "SUBJECT_ALARMS"]

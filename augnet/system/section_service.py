@@ -207,6 +207,12 @@ class SectionService:
         return SectionTrains(epoch_ms, section_id, DIRECTIONS.index(direction), q.version,
                              tuple(section_train(r) for r in q))
 
+    def report(self) -> dict:
+        """For the run report: counters, every transition, the final order per section and direction."""
+        return {"stats": dict(self.stats), "events": [dataclasses.asdict(e) for e in self.events],
+                "order": {f"{sid} {d}": list(q.ids()) for (sid, d), q in sorted(self.register.queues.items())},
+                "in_station": {t: s for t, (s, _tr) in sorted(self.in_station.items())}}
+
     def snapshot(self) -> dict:
         return {"sections": self.register.snapshot(),
                 "stations": [dataclasses.asdict(s) for s in self.stations],

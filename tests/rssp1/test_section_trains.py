@@ -63,3 +63,20 @@ def test_a_section_too_full_for_one_rsd_is_refused():
     n = (MAX_RSD_DATA_BYTES - SECTION_TRAINS_RESERVE_BYTES) // 69 + 1
     with pytest.raises(ValueError):
         centre.set_section_trains(SectionTrains(1, 1, 0, 1, tuple(train(f"T{i}", i) for i in range(n))))
+
+
+def test_a_changed_picture_goes_first_when_a_round_takes_many_cycles():
+    """21 sections x 2 directions x 10 trains: one picture (710 bytes) per RSD, a round of 42 cycles; a
+    change still reaches the RBC in the next cycle."""
+    centre, rbc, net = rbc_pair()
+    centre.set_section(1, SectionStatus.OK)
+    centre.corrections_updated(1_000, produced_at_s=net.now)
+    for sid in range(1, 22):
+        for d in (0, 1):
+            centre.set_section_trains(SectionTrains(5_000, sid, d, 1, tuple(train(f"T{sid}{d}{i}", i) for i in range(10))))
+    net.step(60)
+    assert len(rbc.view.section_trains) == 42
+    changed = SectionTrains(6_000, 17, 1, 2, (train("G9", 170.0),))
+    centre.set_section_trains(changed)
+    net.step(1)  # the next cycle carries it (the round would reach it 15 cycles later)
+    assert rbc.view.section_trains[(17, 1)] == changed

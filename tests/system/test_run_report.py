@@ -56,7 +56,7 @@ EXPECTED = {
     "caster": {"port": 2101, "counters": {"requests": 10, "rejected": 1},
                "mounts": {"VRS": {"bytes_in": 0, "bytes_out": 5000, "clients_total": 2},
                           "STA1": {"bytes_in": 900, "bytes_out": 0, "clients_total": 0}}},
-    "store": {"writes": 17, "failures": 0},
+    "store": {"writes": 17, "failures": 0}, "sections": {},  # filled by the System (section register)
 }
 
 
@@ -74,4 +74,4 @@ def test_a_run_that_never_started_its_parts_reports_empty_sections():
     assert report == {"scenario": "demo", "started_utc": "2026-11-18T11:06:40.250000+00:00", "duration_s": 240.1,
                       "stations": [], "network_epochs": 0, "centre_solve_ms_p99": None, "centre_latency": {},
                       "centre_stages_ms": {}, "centre_errors": 0, "centre_restarts": 0, "trains": {}, "alarms": [],
-                      "rbc": {}, "caster": {}, "store": {}}
+                      "rbc": {}, "caster": {}, "store": {}, "sections": {}}

@@ -289,3 +289,29 @@ def test_the_store_holds_the_run(up_run):
     subjects = {r[0] for r in db.execute("select distinct subject from quality_history")}
     assert {"network:correction_age_p99_s", "trains:fixed", "trains:reporting",
             "station:STA1:data_age_s"} <= subjects  # the charts' series at the same cadence (decision 0185)
+
+
+def test_the_section_register_follows_the_trains_and_reaches_the_rbc(up_run):
+    """Train information per section (issue 16): each train's position reports reach the centre, which
+    keeps every train in one place (a section's queue or a station), sends each section's picture to the
+    RBC over RSSP-I (SECTION_TRAINS) and stores it."""
+    report = _finished(up_run)
+    sec = report["sections"]
+    print(json.dumps({k: sec[k] for k in ("stats", "order", "in_station", "reports_sent")}))
+    sent = sec["reports_sent"]
+    assert set(sent) == {"G101", "G303"} and all(n > 0 for n in sent.values())
+    assert sec["stats"]["reports"] >= 0.99 * sum(sent.values())  # loopback UDP: none lost
+    assert not [k for k in sec["stats"] if k.startswith("refused_")], sec["stats"]
+    placed = [t for ids in sec["order"].values() for t in ids] + list(sec["in_station"])
+    assert sorted(placed) == ["G101", "G303"]  # every train in exactly one place
+    admitted = {e["train_id"] for e in sec["events"] if e["action"] == "admit"}
+    assert admitted == {"G101", "G303"}  # start of mission inside a section, once each
+    n_sections = len({k.split()[0] for k in sec["order"]})
+    assert report["rbc"]["section_trains"]["pictures"] == 2 * n_sections
+    assert report["rbc"]["section_trains"]["trains"] >= 1
+    db = sqlite3.connect(up_run["work"] / "augnet.db")
+    stored = {r[0]: (r[1], r[2]) for r in db.execute("select train_code, section_id, direction from section_trains")}
+    in_sections = {t: (int(k.split()[0]), k.split()[1]) for k, ids in sec["order"].items() for t in ids}
+    assert stored == in_sections
+    audits = {r[0] for r in db.execute("select target from audit_log where action = 'section.admit'")}
+    assert audits and all(a.startswith("section ") for a in audits)
