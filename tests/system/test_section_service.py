@@ -128,3 +128,35 @@ def test_telegram_and_dirty_sections(svc):
     assert t.correction_age_ms == 0xFFFFFFFF and t.along_pl_cm == 0xFFFF and t.cross_pl_cm == 30
     audit = svc.reorder(2, "up", ["T1"], Authority("dora", "dispatcher"), "check")
     assert audit.action == "section.reorder" and svc.take_dirty() == [(2, "up")]
+
+
+def test_reports_travel_as_datagrams_from_the_trains_reporter():
+    """A train's reporter -> one UDP datagram per second of GPS time -> the centre's register (loopback)."""
+    import asyncio
+    from types import SimpleNamespace as NS
+
+    from augnet.system.section_service import TrainReporter, open_receiver, open_sender
+
+    async def go():
+        svc = SectionService([StationArea("A", 50.0, 52.0)], 100.0)
+        transport, address = await open_receiver(svc)
+        sender = await open_sender(address)
+        train = NS(id="G7", protection_levels=lambda: (0.05, 0.09), correction_age_s=lambda: 1.2)
+        rep = TrainReporter(train, sender.send)
+        for i, km in enumerate([60.0, 60.05, 60.1, 60.15, 60.2]):
+            match = NS(track="L1-1", km=km, along_pl_m=0.04, cross_pl_m=0.03, confirmed=True)
+            rep.on_output(NS(match=match, solution=NS(time=T0 + i * 0.5)))  # 2 Hz outputs: every other sent
+        rep.on_output(NS(match=None, solution=NS(time=T0 + 9)))  # off the map: nothing to report
+        for _ in range(100):
+            if svc.stats["reports"] == rep.sent:
+                break
+            await asyncio.sleep(0.01)
+        sender.close()
+        transport.close()
+        return svc, rep
+
+    svc, rep = asyncio.run(go())
+    assert rep.sent == 3 and svc.stats["reports"] == 3
+    (r,) = svc.register.trains(2, "up")
+    assert (r.train_id, r.km, r.hpl_m, r.correction_age_s, r.length_m) == ("G7", 60.2, 0.05, 1.2, 209.0)
+    assert r.speed_m_s == pytest.approx(100.0)  # 100 m in 1 s of GPS time
