@@ -326,7 +326,8 @@ def decode_message(msg_type: int, body: bytes) -> Message:
             raise MessageError("value", f"direction {direction}")
         trains = []
         for i in range(n):
-            tid, track, ch, speed, length, integ, age, apl, cpl, hpl, rep = _SECTION_ITEM.unpack_from(rest, i * _SECTION_ITEM.size)
+            values_i = _SECTION_ITEM.unpack_from(rest, i * _SECTION_ITEM.size)
+            tid, track, ch, speed, length, integ, age, apl, cpl, hpl, rep = values_i
             name = _unpad(tid, "train id")
             if not name:
                 raise MessageError("value", "empty train id")

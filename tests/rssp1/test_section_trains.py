@@ -73,7 +73,8 @@ def test_a_changed_picture_goes_first_when_a_round_takes_many_cycles():
     centre.corrections_updated(1_000, produced_at_s=net.now)
     for sid in range(1, 22):
         for d in (0, 1):
-            centre.set_section_trains(SectionTrains(5_000, sid, d, 1, tuple(train(f"T{sid}{d}{i}", i) for i in range(10))))
+            trains = tuple(train(f"T{sid}{d}{i}", i) for i in range(10))
+            centre.set_section_trains(SectionTrains(5_000, sid, d, 1, trains))
     net.step(60)
     assert len(rbc.view.section_trains) == 42
     changed = SectionTrains(6_000, 17, 1, 2, (train("G9", 170.0),))
