@@ -7,7 +7,8 @@ Routes (OpenAPI at /openapi.json, interactive docs at /docs):
   /api/stations         registry + live state; add / edit (admin), enable / disable (operator)
   /api/network, /api/network/baselines, /api/line
   /api/trains, /api/trains/{id}
-  /api/sections, /api/sections/{id}/{up|down}, .../reorder (operator: the dispatcher's order; audited)
+  /api/sections, /api/sections/{id}/{up|down}, .../reorder, .../withdraw, /api/sections/admit (operator as
+                        dispatcher; audited)
   /api/alarms, /api/alarms/{id}, /api/alarms/{id}/acknowledge (operator)
   /api/caster, /api/caster/mountpoints, /api/caster/clients, /api/caster/users (changes: admin)
   /api/quality, /api/history/series (the charts' downsampled quality history), /api/audit

@@ -80,6 +80,7 @@ class SectionService:
         self.stats: collections.Counter[str] = collections.Counter()
         self._dirty: set[tuple[int, str]] = set(self.register.queues)  # the first flush sends every section
         self._alarmed: set[tuple[str, str]] = set()  # (train, refusal code) with an open alarm
+        self._held: set[str] = set()  # withdrawn by a dispatcher: only a dispatcher (or a station) puts it back
 
     @property
     def sections(self) -> dict[int, LineSection]:
@@ -145,9 +146,10 @@ class SectionService:
                                   and q.distance_from_entry_m(r.km) <= BOUNDARY_ZONE_M):
             if self._do(r, lambda: self.register.insert(sec.id, r.direction, rec, by=entry)):
                 self.in_station.pop(r.train_id, None)
+                self._held.discard(r.train_id)
                 self._event(r, "insert", key, entry)
             return
-        if self.start_authority is None:
+        if self.start_authority is None or r.train_id in self._held:
             self.stats["waiting_for_admission"] += 1
             return
         reason = f"start of mission: first report at km {r.km:.3f} inside section {sec.id}"
@@ -192,6 +194,32 @@ class SectionService:
         self._dirty.add((section_id, direction))
         return audit
 
+    def admit(self, train_id: str, authority: Authority | None, reason: str) -> AuditRecord:
+        """A train waiting for admission (reporting inside a section, in none) placed by its last report."""
+        r = self.last.get(train_id)
+        sec = None if r is None or r.direction not in DIRECTIONS else self.register.section_at(r.km)
+        if sec is None:
+            raise RegisterError("unknown-train", f"{train_id} has no report inside a section")
+        audit = self.register.admit(sec.id, r.direction, record_of(r), authority, reason)
+        self._held.discard(train_id)
+        self.in_station.pop(train_id, None)
+        self._event(r, "admit", (sec.id, r.direction), audit.actor)
+        return audit
+
+    def withdraw(self, section_id: int, direction: str, train_id: str, authority: Authority | None,
+                 reason: str) -> AuditRecord:
+        audit = self.register.withdraw(section_id, direction, train_id, authority, reason)
+        self._held.add(train_id)
+        self._dirty.add((section_id, direction))
+        return audit
+
+    def waiting(self) -> list[str]:
+        """Trains reporting inside a section that the register does not hold (no start-of-mission authority,
+        or withdrawn): a dispatcher admits them."""
+        return sorted(t for t, r in self.last.items()
+                      if self.register.where(t) is None and t not in self.in_station and r.direction in DIRECTIONS
+                      and self.register.section_at(r.km) is not None and self.station_at(r.km) is None)
+
     # --- output ---------------------------------------------------------------------------------------
 
     def take_dirty(self) -> list[tuple[int, str]]:
@@ -217,6 +245,7 @@ class SectionService:
         return {"sections": self.register.snapshot(),
                 "stations": [dataclasses.asdict(s) for s in self.stations],
                 "in_station": {t: {"station": s, "track": tr} for t, (s, tr) in sorted(self.in_station.items())},
+                "waiting": self.waiting(),
                 "events": [dataclasses.asdict(e) for e in list(self.events)[-50:]],
                 "stats": dict(self.stats)}
 

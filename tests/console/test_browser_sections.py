@@ -74,7 +74,18 @@ def test_section_view_order_station_passage_and_dispatcher_reorder(driver, sqlit
         wait.until(lambda d: attribute(d, chip(2, "up", "G2"), "data-position") == "0")
         assert attribute(driver, chip(2, "up", "G1"), "data-position") == "1"
         wait.until(lambda d: "otto section.reorder section 2 up" in text(d, "#audit tbody"))
-        assert not driver.find_elements(By.CSS_SELECTOR, chip(2, "up", "G2") + " button")  # the front has none
+        assert not driver.find_elements(By.CSS_SELECTOR, chip(2, "up", "G2") + " button.move-ahead")  # the front
+
+        # the dispatcher withdraws G4 (it reports again: it waits), then admits it back
+        driver.find_element(By.ID, "section-reason").send_keys("radio lost, driver stopped at km 71")
+        driver.find_element(By.CSS_SELECTOR, chip(2, "up", "G4") + " button.withdraw").click()
+        wait.until(lambda d: not d.find_elements(By.CSS_SELECTOR, chip(2, "up", "G4")))
+        svc.on_report(report("G4", 140, 71.0))
+        wait.until(lambda d: d.find_elements(By.CSS_SELECTOR, '#sections-waiting button.admit[data-train="G4"]'))
+        driver.find_element(By.ID, "section-reason").send_keys("radio back, position confirmed by the driver")
+        driver.find_element(By.CSS_SELECTOR, '#sections-waiting button.admit[data-train="G4"]').click()
+        wait.until(lambda d: attribute(d, chip(2, "up", "G4"), "data-position") == "2")
+        wait.until(lambda d: "otto section.admit section 2 up" in text(d, "#audit tbody"))
         driver.save_screenshot(str(tmp_path / "sections.png"))
     assert [r.train_id for r in svc.register.trains(2, "up")] == ["G2", "G1", "G4"]
     with sqlite_sessions() as s:

@@ -94,3 +94,28 @@ def test_without_a_register_the_store_answers(sessions):
              "hpl_m": None, "time_s": T0 + 200}])
     with sessions() as s:
         assert {k: [t["train_id"] for t in v] for k, v in q.section_trains(s).items()} == {(3, "up"): ["G1"]}
+
+
+def test_dispatcher_withdraws_and_admits_a_train(sqlite_sessions):
+    svc, client, tokens = make(sqlite_sessions)
+    reason = {"train_id": "G2", "reason": "radio lost since km 80, train stopped by the driver"}
+    with client:
+        assert client.post("/api/sections/2/up/withdraw", json=reason, headers=auth(tokens, "vera")).status_code == 403
+        r = client.post("/api/sections/2/up/withdraw", json=reason, headers=auth(tokens, "otto"))
+        assert r.status_code == 200 and [t["train_id"] for t in r.json()["trains"]] == ["G1"]
+        assert client.post("/api/sections/2/up/withdraw", json=reason,
+                           headers=auth(tokens, "otto")).status_code == 404  # not there any more
+        svc.on_report(report("G2", 10, 80.5))  # it reports again: withdrawn trains wait for a dispatcher
+        body = client.get("/api/sections", headers=auth(tokens, "vera")).json()
+        assert body["waiting"] == ["G2"] and svc.register.where("G2") is None
+        assert client.post("/api/sections/admit", json={"train_id": "G9", "reason": "x"},
+                           headers=auth(tokens, "otto")).status_code == 404
+        r = client.post("/api/sections/admit", json={"train_id": "G2", "reason": "radio back, position confirmed"},
+                        headers=auth(tokens, "otto"))
+        assert r.status_code == 200 and [t["train_id"] for t in r.json()["trains"]] == ["G1", "G2"]
+        assert r.json()["trains"][1]["km"] == 80.5
+        assert client.get("/api/sections", headers=auth(tokens, "vera")).json()["waiting"] == []
+    with sqlite_sessions() as s:
+        actions = [(e.actor, e.action, e.target) for e in q.audit_log(s) if e.action.startswith("section.")]
+        assert ("otto", "section.withdraw", "section 2 up") in actions
+        assert ("otto", "section.admit", "section 2 up") in actions

@@ -63,6 +63,12 @@ class SectionsOut(BaseModel):
     sections: list[SectionOut]
     stations: list[StationAreaOut] = []
     in_station: dict[str, dict[str, str]] = {}  # train -> {station, track}
+    waiting: list[str] = []  # trains reporting inside a section that the register does not hold
+
+
+class TrainActionIn(BaseModel):
+    train_id: str = Field(min_length=1, max_length=32)
+    reason: str = Field(min_length=1, max_length=MAX_REASON_CHARS)
 
 
 class ReorderIn(BaseModel):
@@ -89,7 +95,8 @@ async def list_sections(who: Viewer, request: Request) -> SectionsOut:
     if svc is None:
         return await run_in_threadpool(_stored, request)
     snap = svc.snapshot()  # on the event loop, where the register changes: a consistent picture
-    return SectionsOut(live=True, sections=snap["sections"], stations=snap["stations"], in_station=snap["in_station"])
+    return SectionsOut(live=True, sections=snap["sections"], stations=snap["stations"], in_station=snap["in_station"],
+                       waiting=snap["waiting"])
 
 
 @router.get("/{section_id}/{direction}", response_model=SectionOut,
@@ -107,22 +114,13 @@ async def get_section(section_id: SectionId, direction: Direction, who: Viewer, 
     return SectionOut(**snap)
 
 
-@router.post("/{section_id}/{direction}/reorder", response_model=SectionOut,
-             responses={404: {"description": "no such section or train"}, 409: {"description": "refused"},
-                        503: {"description": "no running register"}})
-async def reorder(section_id: SectionId, direction: Direction, body: ReorderIn, who: OperatorRole,
-                  request: Request) -> SectionOut:
-    """The dispatcher's new order of the section's trains (front first), with a reason: the one change to a
-    section's order that does not come from a station (operator or admin; audited)."""
-    svc = _service(request)
-    if svc is None:
-        raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, "no section register runs in this process")
-    try:
-        audit = svc.reorder(section_id, direction, list(body.order), Authority(who.name, "dispatcher"), body.reason)
-    except RegisterError as exc:
-        code = status.HTTP_404_NOT_FOUND if exc.code in NOT_FOUND_CODES else status.HTTP_409_CONFLICT
-        raise HTTPException(code, {"code": exc.code, "message": str(exc)}) from exc
+def _refusal(exc: RegisterError) -> HTTPException:
+    code = status.HTTP_404_NOT_FOUND if exc.code in NOT_FOUND_CODES else status.HTTP_409_CONFLICT
+    return HTTPException(code, {"code": exc.code, "message": str(exc)})
 
+
+async def _audited(request: Request, svc, audit, undo) -> None:
+    """The dispatcher's change into the audit log; undone (`undo()`) when the entry cannot be written."""
     def store() -> None:
         with request.app.state.sessions.begin() as session:
             q.audit(session, audit.actor, audit.action, audit.target, reason=audit.reason, before=list(audit.before),
@@ -131,8 +129,70 @@ async def reorder(section_id: SectionId, direction: Direction, body: ReorderIn, 
     try:
         await run_in_threadpool(store)
     except Exception as exc:  # noqa: BLE001 - no dispatcher change stands without its audit entry
-        svc.reorder(section_id, direction, list(audit.before), Authority(who.name, "dispatcher"),
-                    "reverted: the audit entry could not be written")
-        raise HTTPException(status.HTTP_500_INTERNAL_SERVER_ERROR, "audit entry not written; order unchanged") from exc
-    snap = next(s for s in svc.register.snapshot() if s["section"] == section_id and s["direction"] == direction)
-    return SectionOut(**snap)
+        undo()
+        raise HTTPException(status.HTTP_500_INTERNAL_SERVER_ERROR, "audit entry not written; change undone") from exc
+
+
+def _running(request: Request):
+    svc = _service(request)
+    if svc is None:
+        raise HTTPException(status.HTTP_503_SERVICE_UNAVAILABLE, "no section register runs in this process")
+    return svc
+
+
+def _section_out(svc, section_id: int, direction: str) -> SectionOut:
+    return SectionOut(**next(s for s in svc.register.snapshot()
+                             if s["section"] == section_id and s["direction"] == direction))
+
+
+@router.post("/{section_id}/{direction}/reorder", response_model=SectionOut,
+             responses={404: {"description": "no such section or train"}, 409: {"description": "refused"},
+                        503: {"description": "no running register"}})
+async def reorder(section_id: SectionId, direction: Direction, body: ReorderIn, who: OperatorRole,
+                  request: Request) -> SectionOut:
+    """The dispatcher's new order of the section's trains (front first), with a reason: the one change to a
+    section's order that does not come from a station (operator or admin; audited)."""
+    svc = _running(request)
+    authority = Authority(who.name, "dispatcher")
+    try:
+        audit = svc.reorder(section_id, direction, list(body.order), authority, body.reason)
+    except RegisterError as exc:
+        raise _refusal(exc) from exc
+    await _audited(request, svc, audit, lambda: svc.reorder(section_id, direction, list(audit.before), authority,
+                                                            "reverted: the audit entry could not be written"))
+    return _section_out(svc, section_id, direction)
+
+
+@router.post("/admit", response_model=SectionOut,
+             responses={404: {"description": "no report inside a section"}, 409: {"description": "refused"},
+                        503: {"description": "no running register"}})
+async def admit(body: TrainActionIn, who: OperatorRole, request: Request) -> SectionOut:
+    """A waiting train into the register where its last report puts it (operator or admin; audited)."""
+    svc = _running(request)
+    authority = Authority(who.name, "dispatcher")
+    try:
+        audit = svc.admit(body.train_id, authority, body.reason)
+    except RegisterError as exc:
+        raise _refusal(exc) from exc
+    sid, d = svc.register.where(body.train_id)
+    await _audited(request, svc, audit, lambda: svc.withdraw(sid, d, body.train_id, authority,
+                                                             "reverted: the audit entry could not be written"))
+    return _section_out(svc, sid, d)
+
+
+@router.post("/{section_id}/{direction}/withdraw", response_model=SectionOut,
+             responses={404: {"description": "no such section or train"}, 409: {"description": "refused"},
+                        503: {"description": "no running register"}})
+async def withdraw(section_id: SectionId, direction: Direction, body: TrainActionIn, who: OperatorRole,
+                   request: Request) -> SectionOut:
+    """A train off the register (lost radio, withdrawn from service; operator or admin; audited). It waits for
+    a dispatcher's admission if it reports again."""
+    svc = _running(request)
+    authority = Authority(who.name, "dispatcher")
+    try:
+        audit = svc.withdraw(section_id, direction, body.train_id, authority, body.reason)
+    except RegisterError as exc:
+        raise _refusal(exc) from exc
+    await _audited(request, svc, audit, lambda: svc.admit(body.train_id, authority,
+                                                          "reverted: the audit entry could not be written"))
+    return _section_out(svc, section_id, direction)

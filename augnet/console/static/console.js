@@ -211,20 +211,25 @@ async function refreshSections() {
   try { state.sections = await api("GET", "/api/sections"); renderSections(); } catch (e) { console.warn(e); }
 }
 
-// The dispatcher's action: train `tid` one place towards the exit (swapped with the train ahead).
-async function moveAhead(sec, tid) {
+// The dispatcher's actions (each needs the reason typed below the view; audited by the server).
+async function dispatcherAction(path, body) {
   const reason = $("section-reason").value.trim();
   $("section-error").textContent = "";
-  if (!reason) { $("section-error").textContent = "a reorder needs a reason"; return; }
+  if (!reason) { $("section-error").textContent = "a dispatcher's change needs a reason"; return; }
+  try {
+    await api("POST", path, Object.assign({ reason }, body));
+    $("section-reason").value = "";
+  } catch (e) { $("section-error").textContent = String(e); }
+  await Promise.all([refreshSections(), refreshAudit()]);
+}
+
+// Train `tid` one place towards the exit (swapped with the train ahead).
+function moveAhead(sec, tid) {
   const order = sec.trains.map((t) => t.train_id);
   const i = order.indexOf(tid);
   if (i <= 0) return;
   [order[i - 1], order[i]] = [order[i], order[i - 1]];
-  try {
-    await api("POST", "/api/sections/" + sec.section + "/" + sec.direction + "/reorder", { order, reason });
-    $("section-reason").value = "";
-  } catch (e) { $("section-error").textContent = String(e); }
-  await Promise.all([refreshSections(), refreshAudit()]);
+  return dispatcherAction("/api/sections/" + sec.section + "/" + sec.direction + "/reorder", { order });
 }
 
 function renderSections() {
@@ -264,6 +269,13 @@ function renderSections() {
           b.addEventListener("click", () => moveAhead(sec, t.train_id));
           li.append(b);
         }
+        if (canOperate() && s.live) {
+          const w = el("button", { type: "button", class: "withdraw", "data-train": t.train_id,
+            title: "dispatcher: take the train off the register" }, "withdraw");
+          w.addEventListener("click", () => dispatcherAction(
+            "/api/sections/" + sec.section + "/" + sec.direction + "/withdraw", { train_id: t.train_id }));
+          li.append(w);
+        }
         list.append(li);
       }
       box.append(list);
@@ -271,6 +283,20 @@ function renderSections() {
     });
     rows.push(row);
   }
+  const waiting = el("div", { id: "sections-waiting", class: "muted" });
+  if ((s.waiting || []).length) {
+    waiting.append("waiting for a dispatcher's admission: ");
+    for (const tid of s.waiting) {
+      const span = el("span", { class: "section-train", "data-waiting": tid }, tid);
+      if (canOperate()) {
+        const b = el("button", { type: "button", class: "admit", "data-train": tid }, "admit");
+        b.addEventListener("click", () => dispatcherAction("/api/sections/admit", { train_id: tid }));
+        span.append(b);
+      }
+      waiting.append(span, " ");
+    }
+  }
+  rows.push(waiting);
   $("sections").replaceChildren(...rows);
 }
 
