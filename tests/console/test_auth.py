@@ -18,7 +18,8 @@ from tests.console.helpers import PASSWORDS, error_fields
 PUBLIC_ROUTES = {("get", "/healthz"), ("get", "/metrics"), ("post", "/api/auth/login")}
 # The lowest role each changing route needs (reads need viewer).
 OPERATOR_ROUTES = {("post", "/api/alarms/{alarm_id}/acknowledge"), ("post", "/api/stations/{code}/disable"),
-                   ("post", "/api/stations/{code}/enable")}
+                   ("post", "/api/stations/{code}/enable"), ("post", "/api/sections/{section_id}/{direction}/reorder"),
+                   ("post", "/api/sections/{section_id}/{direction}/withdraw"), ("post", "/api/sections/admit")}
 ADMIN_ROUTES = {("get", "/api/operators"), ("post", "/api/operators"), ("patch", "/api/operators/{name}"),
                 ("post", "/api/stations"), ("patch", "/api/stations/{code}"),
                 ("post", "/api/caster/mountpoints"), ("patch", "/api/caster/mountpoints/{name}"),
