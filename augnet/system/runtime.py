@@ -240,7 +240,11 @@ class System:
         epoch_ms = int(round(gtime.now_gpst() * 1000))
         for sid, d in self.sections.take_dirty():
             if self.rbc is not None:
-                self.rbc.centre.set_section_trains(self.sections.telegram(sid, d, epoch_ms))
+                try:
+                    self.rbc.centre.set_section_trains(self.sections.telegram(sid, d, epoch_ms))
+                except ValueError:  # more trains than one RSD carries: the RBC keeps the last picture that fit
+                    self.sections.stats["rbc_picture_too_large"] += 1
+                    log.warning("section %s %s: too many trains for one SECTION_TRAINS telegram", sid, d)
             recs = self.sections.records(sid, d)
             self.writer.submit(lambda db, sid=sid, d=d, recs=recs:
                                store_queries.replace_section_trains(db, sid, d, recs))

@@ -160,3 +160,33 @@ def test_reports_travel_as_datagrams_from_the_trains_reporter():
     (r,) = svc.register.trains(2, "up")
     assert (r.train_id, r.km, r.hpl_m, r.correction_age_s, r.length_m) == ("G7", 60.2, 0.05, 1.2, 209.0)
     assert r.speed_m_s == pytest.approx(100.0)  # 100 m in 1 s of GPS time
+
+
+def test_the_systems_flush_sends_changed_sections_to_the_rbc_and_the_store(svc):
+    """`System.flush_sections`: what changed since the last flush, to the RBC link and the store writer; a
+    section too full for one RSD is counted, the others still go."""
+    from types import SimpleNamespace as NS
+
+    from augnet.system.runtime import System
+    from rssp1.config import LinkTiming
+    from rssp1.endpoint import Endpoint
+    from rssp1.messages import decode_payload
+    from rssp1.rbc import CentreRbcLink
+    from tests.rssp1.linkpair import CENTRE, RBC
+
+    jobs = []
+    system = System.__new__(System)
+    system.sections = svc
+    system.rbc = NS(centre=CentreRbcLink(Endpoint(CENTRE, RBC, LinkTiming())))
+    system.writer = NS(submit=jobs.append)
+    system.flush_sections()
+    assert len(system.rbc.centre.section_trains) == 6 and len(jobs) == 6  # the first flush: every section
+    for i in range(18):  # 18 trains in section 2 up: more than one RSD carries
+        svc.on_report(report(f"T{i:02d}", 0, 99.0 - i))
+    svc.on_report(report("D1", 0, 120.0, direction="down"))
+    jobs.clear()
+    system.flush_sections()
+    assert svc.stats["rbc_picture_too_large"] == 1 and len(jobs) == 2  # both stored
+    assert len(system.rbc.centre.section_trains) == 6
+    (pic,) = decode_payload(system.rbc.centre.section_trains[(3, 1)]).messages
+    assert [t.train_id for t in pic.trains] == ["D1"]
