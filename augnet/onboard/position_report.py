@@ -40,8 +40,9 @@ REPORT_LAYOUT = (
 _BODY = struct.Struct("<" + "".join(code for _n, code in REPORT_LAYOUT))
 _CRC = struct.Struct("<I")
 REPORT_BYTES = _BODY.size + _CRC.size
-# A train must move this far along the track before its direction is taken from the chainage [m]: well
-# over the along-track noise of a float solution (decimetres), so a standing train does not flip.
+# A train must move this far along the track (and at least its along-track protection level) before its
+# direction is taken from the chainage [m]: over a float solution's along-track noise (decimetres), so a
+# standing train does not flip.
 MIN_DIRECTION_MOVE_M = 2.0
 # The train's length when no train data entry gives one [m]: a CR400AF 8-car EMU (CRRC, 209 m).
 DEFAULT_TRAIN_LENGTH_M = 209.0
@@ -150,9 +151,12 @@ class ReportBuilder:
         if self._prev is not None and time_s > self._prev[0]:
             speed = abs(km - self._prev[1]) * 1e3 / (time_s - self._prev[0])
         self._prev = (time_s, km)
+        # a move smaller than the along-track protection level may be noise (a single-point solution's metres)
+        threshold_m = max(MIN_DIRECTION_MOVE_M, along_pl_m if along_pl_m is not None and math.isfinite(along_pl_m)
+                          else 0.0)
         if self._anchor_km is None:
             self._anchor_km = km
-        elif abs(km - self._anchor_km) * 1e3 >= MIN_DIRECTION_MOVE_M:
+        elif abs(km - self._anchor_km) * 1e3 >= threshold_m:
             self.direction = "up" if km > self._anchor_km else "down"
             self._anchor_km = km
         self.seq += 1

@@ -44,6 +44,10 @@ def test_builder_takes_direction_and_speed_from_the_chainage():
     assert b.build(T0 + 1, "L1-2", 100.0005, **kw).direction == "unknown"  # 0.5 m: noise, not a direction
     r = b.build(T0 + 2, "L1-2", 99.9165, **kw)
     assert r.direction == "down" and r.speed_m_s == pytest.approx(84.0, abs=0.1) and r.seq == 3
+    # standing, a single-point solution wanders 5 m back and forth: within its 12 m PL, no flip
+    for i, km in enumerate([99.9215, 99.9165, 99.9215]):
+        assert b.build(T0 + 3 + i, "L1-2", km, **dict(kw, along_pl_m=12.0)).direction == "down"
+    assert b.build(T0 + 6, "L1-2", 99.9300, **dict(kw, along_pl_m=12.0)).direction == "up"  # 13.5 m: moved
 
 
 @pytest.fixture
