@@ -14,7 +14,7 @@ import math
 from dataclasses import dataclass, field
 
 from augnet.onboard.position_report import DEFAULT_TRAIN_LENGTH_M, ReportBuilder, encode
-from augnet.system.section_service import SectionEvent, SectionService, StationArea
+from augnet.system.section_service import SectionEvent, SectionService, stations_of
 
 
 @dataclass
@@ -25,10 +25,6 @@ class SectionReplay:
     order_mismatches: list[tuple[float, int, str, tuple[str, ...], tuple[str, ...]]] = field(default_factory=list)
     # each transition with how far past its boundary (truth chainage) the train was when it happened [m]
     transitions: list[tuple[SectionEvent, float]] = field(default_factory=list)
-
-
-def stations_of(scenario) -> list[StationArea]:
-    return [StationArea(s.name, s.start_km, s.end_km) for s in scenario.line.stations] if scenario.line else []
 
 
 def replay(log, length_m: float = DEFAULT_TRAIN_LENGTH_M) -> SectionReplay:
@@ -90,4 +86,4 @@ def _past_boundary_m(service: SectionService, ev: SectionEvent, truth_km: float)
     return (truth_km - boundary) * 1e3 * (1 if up else -1)
 
 
-__all__ = ["SectionReplay", "replay", "stations_of"]
+__all__ = ["SectionReplay", "replay"]

@@ -4,11 +4,13 @@ wired in the order the data flows.
     simulated stations --NTRIP sources--> caster :2101 --taps--> centre (its own process: centre_service.py)
     centre --VRS per train (stream factory)--> caster VRS mountpoint --NTRIP + GGA--> onboard trains
     centre --correction model, alarms--> bus;  centre --RSSP-I over loopback UDP--> RBC simulator
+    trains --position reports (UDP)--> section register --SECTION_TRAINS (RSSP-I)--> RBC, and --> store
     everything --> live state --> console :8000 (REST, websocket, web page) and the terminal view
     configuration, sessions, alarms, quality history --> store (SQLite file, or PostgreSQL by URL)
 
 `System.start` takes one step per part: store, centre (created), caster (then the centre's process starts
-behind its taps), bus, RBC link, live state and console, trains, then the stations that feed them all.
+behind its taps), bus, RBC link, section register, live state and console, trains, then the stations that
+feed them all.
 `shutdown` stops the stations' feed first and the rest backwards, so nothing writes into a closed neighbour.
 
 This module only wires and routes; each subject lives in its own module: the run's configuration (scenario,
@@ -213,8 +215,7 @@ class System:
         the store and the RBC every `SECTION_FLUSH_S`."""
         if self.world.track is None:
             return
-        from augnet.scenario.sections import stations_of
-        from augnet.system.section_service import SectionService, open_receiver
+        from augnet.system.section_service import SectionService, open_receiver, stations_of
 
         self.sections = SectionService(stations_of(sc), self.world.track.length_m / 1000.0,
                                        on_audit=self._section_audit, on_alarm=self._alarm)

@@ -58,6 +58,11 @@ class SectionEvent:
     by: str  # the station (or line end) acting, or the authority's name
 
 
+def stations_of(scenario) -> list[StationArea]:
+    """A scenario line's station areas (`stations.scenario.StationArea`: name, start and end km)."""
+    return [StationArea(s.name, s.start_km, s.end_km) for s in scenario.line.stations] if scenario.line else []
+
+
 def record_of(r: PositionReport) -> TrainRecord:
     return TrainRecord(r.train_id, r.track, r.km, r.speed_m_s, r.length_m, r.integrity, r.correction_age_s,
                        r.along_pl_m, r.cross_pl_m, r.hpl_m, r.time_s)
