@@ -170,15 +170,17 @@ class System:
         records) and the centre as its VRS stream factory, each registered station's stream tapped into the
         centre; returns its port. Its tables follow the store from then on (`caster_access.py`), and the
         network's stations the registry (`station_membership.py`)."""
-        from augnet.system.caster_access import CasterAccessSync, caster_tables
+        from augnet.system.caster_access import CasterAccessSync, bound_mounts, caster_tables
         from augnet.system.station_membership import StationSync
 
         described = {m.name: m for m in seed.mounts}
-        fut = self.writer.submit(lambda db: caster_tables(db, described))
-        users, mounts = await asyncio.wrap_future(fut) or ({}, [])
+        fut = self.writer.submit(lambda db: (*caster_tables(db, described), bound_mounts(db)))
+        users, mounts, bound = await asyncio.wrap_future(fut) or ({}, [], frozenset())
+        self.centre.set_bound_mounts(bound)  # the 4001 opt-in per mountpoint (decision 0281), then live
         self.caster = Caster(replace(seed, users=users, mounts=tuple(mounts)), {VRS_MOUNT: self.centre})
         self.caster.on_alarm = self._alarm  # a bad-password flood is an operator's alarm (issue 19)
-        self.caster_access = CasterAccessSync(self.caster, self.sessions, described)
+        self.caster_access = CasterAccessSync(self.caster, self.sessions, described,
+                                              on_bound_mounts=self.centre.set_bound_mounts)
         port = await self.caster.start()
         self.station_sync = StationSync(self.centre, self.caster, self.sessions, on_applied=self._on_membership)
         self.station_sync.adopt(records)
