@@ -75,3 +75,21 @@ def test_a_run_that_never_started_its_parts_reports_empty_sections():
                       "stations": [], "network_epochs": 0, "centre_solve_ms_p99": None, "centre_latency": {},
                       "centre_stages_ms": {}, "centre_errors": 0, "centre_restarts": 0, "trains": {}, "alarms": [],
                       "rbc": {}, "caster": {}, "store": {}}
+
+
+def test_the_timers_passages_are_reported_with_their_error_against_the_truth():
+    from augnet.onboard.balise_timer import BaliseGroup, Miss, Passage
+    from augnet.system.run_report import timed_balise_entry
+
+    g1, g2 = BaliseGroup("VB-1", "L1-2", 156000.0), BaliseGroup("VB-2", "L1-2", 151000.0)
+    sink = NS(passages=[Passage(g1, 100.0, 100.004, -1, 83.3, 0.058)], misses=[Miss(g2, 160.2, "estimate too old")],
+              brakes=[(161.0, "2 consecutive linked groups missed")])
+    # the truth: 4 cm short of the group at the predicted moment, travelling towards decreasing chainage
+    entry = timed_balise_entry(sink, "G303", lambda tid, t: 156000.04 if (tid, t) == ("G303", 100.0) else None)
+    assert entry == {
+        "passages": [{"group": "VB-1", "time_gpst": 100.0, "emitted_at_gpst": 100.004, "confidence_m": 0.058,
+                      "speed_mps": 83.3, "error_m": -0.04}],
+        "misses": [{"group": "VB-2", "time_gpst": 160.2, "reason": "estimate too old"}],
+        "service_brake_requests": [{"time_gpst": 161.0, "reason": "2 consecutive linked groups missed"}],
+        "max_abs_error_m": 0.04}
+    assert timed_balise_entry(sink, "G303")["passages"][0]["error_m"] is None  # no truth given: none claimed
