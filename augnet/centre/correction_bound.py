@@ -116,6 +116,36 @@ def held_out_distance(station_en: np.ndarray) -> np.ndarray:
     return d.min(axis=1)
 
 
+def line_axis(station_en: np.ndarray) -> np.ndarray:
+    """Unit vector of the stations' main direction in E/N (their first principal axis): the line's."""
+    en = np.asarray(station_en, dtype=float)
+    if en.shape[0] < 2:
+        return np.array([1.0, 0.0])
+    _, _, vt = np.linalg.svd(en - en.mean(axis=0), full_matrices=False)
+    return vt[0]
+
+
+def bracketed_stations(station_en: np.ndarray) -> np.ndarray:
+    """(N,) each station has other stations on both sides of it along the line: held out, it is interpolated;
+    an end station held out is extrapolated (decision 0281)."""
+    en = np.asarray(station_en, dtype=float)
+    u = en @ line_axis(en)
+    out = np.zeros(len(u), bool)
+    for k in range(len(u)):
+        others = np.delete(u, k)
+        out[k] = others.size >= 2 and others.min() < u[k] < others.max()
+    return out
+
+
+def bracketed_points(station_en: np.ndarray, points_en: np.ndarray) -> np.ndarray:
+    """(P,) each point lies between the end stations along the line (its corrections are interpolated)."""
+    en = np.asarray(station_en, dtype=float)
+    axis = line_axis(en)
+    u = en @ axis
+    p = np.atleast_2d(np.asarray(points_en, dtype=float)) @ axis
+    return (p >= u.min()) & (p <= u.max())
+
+
 def ionosphere_level_ppm(station_en: np.ndarray, iono_residuals: np.ndarray, master: int = 0) -> float:
     """RMS DD ionosphere residual per unit baseline to the master [ppm]: the epoch's ionosphere level.
 
@@ -144,6 +174,9 @@ class CorrectionBound:
         self.window_epochs = window_epochs
         self.min_samples = min_samples
         self._window: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=window_epochs)
+        # the same samples from bracketed stations only (interpolated when held out): a train between the end
+        # stations is interpolated too, and an end station's extrapolation error says little about that
+        self._inner: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=window_epochs)
         self._noise: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=window_epochs)
         self._last: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # (station E/N, sats, residuals)
 
@@ -161,9 +194,11 @@ class CorrectionBound:
                 f"{sats.size}")
         if not 0 <= master < en.shape[0]:
             raise CorrectionBoundError(f"master row {master} outside the {en.shape[0]} stations")
+        inner = np.zeros(en.shape[0], bool)
         if en.shape[0] < 3:  # holding one out leaves a single station beside the master: no interpolation
             z = np.full(v.shape, np.nan)
         else:
+            inner = bracketed_stations(en)
             err = interpolation.leave_one_out(en, v, model, master)
             # the held-out station beyond the along-line model's cross-line limit (an end station of a bent
             # 3-station line) gets no prediction: take inverse-distance weights there, a coarser model whose
@@ -181,6 +216,7 @@ class CorrectionBound:
         z = np.where(ref[None, :], np.nan, z)
         noise[:, ref] = np.nan
         self._window.append((sats, z))
+        self._inner.append((sats, np.where(inner[:, None], z, np.nan)))
         self._noise.append((sats, noise))
         return z
 
@@ -222,13 +258,15 @@ class CorrectionBound:
             rows.append(block)
         return np.vstack(rows)
 
-    def _overbound(self, sats, window) -> np.ndarray:
+    def _overbound(self, sats, window, pool: bool = True) -> np.ndarray:
         """Overbound sigma per satellite of a window's samples; pooled over all satellites where one has too
-        few samples, NaN when the whole window has too few."""
+        few samples (`pool`; else NaN there), NaN when the whole window has too few."""
         x = self.samples(sats, window)
         sigma = overbound_sigma(x) if x.size else np.full(len(sats), np.nan)
         counts = np.isfinite(x).sum(axis=0)
         few = counts < self.min_samples
+        if few.any() and not pool:
+            return np.where(few, np.nan, sigma)
         if few.any():
             everything = np.concatenate([z[np.isfinite(z)] for _, z in window]) if window else np.zeros(0)
             pooled = overbound_sigma(everything[:, None])[0] if everything.size >= self.min_samples else np.nan
@@ -238,6 +276,12 @@ class CorrectionBound:
     def normalised_sigma(self, sats) -> np.ndarray:
         """Overbound sigma of the normalised leave-one-out error per satellite (S,) [m per m per ppm]."""
         return self._overbound(sats, self._window)
+
+    def interpolated_sigma(self, sats) -> np.ndarray:
+        """The same from the bracketed stations' samples only, where a satellite has `min_samples` of them; the
+        whole window's elsewhere (S,)."""
+        own = self._overbound(sats, self._inner, pool=False)
+        return np.where(np.isfinite(own), own, self.normalised_sigma(sats))
 
     def noise_sigma(self, sats) -> np.ndarray:
         """Overbound sigma [m] of the station residuals' own noise per satellite (S,)."""
@@ -250,7 +294,12 @@ class CorrectionBound:
         if len(self._window) < self.min_window_epochs:
             return np.full((np.atleast_2d(train_en).shape[0], len(sats)), np.nan)
         geom = np.maximum(nearest_station_distance(station_en, train_en), MIN_GEOMETRY_DISTANCE_M)
-        field = geom[:, None] * self._level(ionosphere_level_ppm) * self.normalised_sigma(sats)[None, :]
+        # a train between the end stations is interpolated: its errors are overbounded by the interpolated
+        # (bracketed) held-out samples; one beyond them is extrapolated, like an end station held out
+        inside = bracketed_points(station_en, train_en)
+        normalised = np.where(inside[:, None], self.interpolated_sigma(sats)[None, :],
+                              self.normalised_sigma(sats)[None, :])
+        field = geom[:, None] * self._level(ionosphere_level_ppm) * normalised
         return np.hypot(field, self.noise_sigma(sats)[None, :])
 
     def bound(self, station_en: np.ndarray, train_en: np.ndarray, sats,
