@@ -89,6 +89,12 @@ def train_entry(stats, holds_fix: bool) -> dict:
         "base_moves": stats.base_moves, "base_resets": stats.base_resets,
         "balises": [b.balise_id for b in stats.balises], "errors": stats.errors,
         "holds_fix": holds_fix,
+        # on the track: the map match's PLs and the 4001 bound on the along axis in them (p50 of the finite
+        # ones), and the epochs whose corrections were unbounded (bounds came, this epoch's did not)
+        "along_pl_p50_m": percentile(np.array(stats.along_pl_m, float), 50),
+        "cross_pl_p50_m": percentile(np.array(stats.cross_pl_m, float), 50),
+        "correction_along_p50_m": percentile(np.array(stats.correction_along_m, float), 50),
+        "unbounded_epochs": int(np.isinf(np.array(stats.correction_along_m, float)).sum()),
     }
 
 

@@ -62,6 +62,10 @@ class TrainStats:
     correction_latency_s: collections.deque = field(default_factory=lambda: collections.deque(maxlen=3600))
     balises: list = field(default_factory=list)
     timer_updates: int = 0  # fused estimates given to the balise timer
+    # the map match's protection levels and, in them, the centre's 4001 bound on each axis [m] (inf: unbounded)
+    along_pl_m: collections.deque = field(default_factory=lambda: collections.deque(maxlen=3600))
+    cross_pl_m: collections.deque = field(default_factory=lambda: collections.deque(maxlen=3600))
+    correction_along_m: collections.deque = field(default_factory=lambda: collections.deque(maxlen=3600))
     errors: int = 0
 
 
@@ -131,11 +135,16 @@ class OnboardTrain:
             return
         while self.rover_queue:
             ep, arrived = self.rover_queue[0]
-            if round(ep.time, 3) in self.bases or now - arrived >= MAX_BASE_WAIT_S:
+            if self._base_ready(ep.time) or now - arrived >= MAX_BASE_WAIT_S:
                 self.rover_queue.popleft()
                 self._process(ep, arrived)
             else:
                 break
+
+    def _base_ready(self, t: float) -> bool:
+        """Epoch t's VRS is here, and its 4001 bound too when the stream carries them (it follows the MSM;
+        a TCP read may split them, and without it the epoch's PLs would be infinite)."""
+        return round(t, 3) in self.bases and (not self.base_dec.bounds.receiving or self.base_dec.bounds.has_epoch(t))
 
     async def tick(self) -> None:
         """Release rover epochs whose VRS never came (centre down, no session yet)."""
@@ -178,7 +187,7 @@ class OnboardTrain:
         try:
             self._update_base(unit)
             base = self.bases.get(round(rover.time, 3), self.last_base if self.base_position is not None else None)
-            out = unit.step(rover, base)
+            out = unit.step(rover, base, self.base_dec.bounds)  # the 4001 bounds, when its mountpoint sends them
         except Exception:  # noqa: BLE001 - the processing loop never dies on data
             self.stats.errors += 1
             return
@@ -190,6 +199,10 @@ class OnboardTrain:
         if out.solution.status == Status.FIX and self.stats.first_fix_s is None:
             self.stats.first_fix_s = rover.time - self._t_first
         self.stats.balises.extend(out.balises)
+        if out.match is not None and out.match.track:
+            self.stats.along_pl_m.append(out.match.along_pl_m)
+            self.stats.cross_pl_m.append(out.match.cross_pl_m)
+            self.stats.correction_along_m.append(out.match.correction_along_m)
         if self.timer is not None:
             self._feed_timer(out)
         if self.on_output is not None:

@@ -25,6 +25,9 @@ def _trains():
                        first_fix_s=31.0, vrs_epochs=220, base_resets=1, base_moves=3,
                        balises=[NS(balise_id="B1"), NS(balise_id="B2")], errors=0)
     fixed.correction_latency_s.extend([0.1, 0.2, 0.3, 0.25, float("nan")])
+    fixed.along_pl_m.extend([0.04, 0.05, 0.06, float("inf")])
+    fixed.cross_pl_m.extend([0.05, 0.06, 0.07, float("inf")])
+    fixed.correction_along_m.extend([0.0, 0.0, 0.0, float("inf")])
     return {"G101": NS(id="G101", stats=fixed, last=NS(solution=NS(status=1))),
             "G303": NS(id="G303", stats=TrainStats(), last=None)}
 
@@ -47,10 +50,12 @@ EXPECTED = {
         "G101": {"epochs": 230, "status_counts": {"fix": 200, "float": 25, "single": 5}, "fix_rate": 0.8696,
                  "time_to_first_fix_s": 31.0, "vrs_epochs": 220, "correction_latency_p50_s": 0.225,
                  "correction_latency_p99_s": 0.298, "base_moves": 3, "base_resets": 1, "balises": ["B1", "B2"],
-                 "errors": 0, "holds_fix": True},
+                 "errors": 0, "holds_fix": True, "along_pl_p50_m": 0.05, "cross_pl_p50_m": 0.06,
+                 "correction_along_p50_m": 0.0, "unbounded_epochs": 1},
         "G303": {"epochs": 0, "status_counts": {}, "fix_rate": 0.0, "time_to_first_fix_s": None, "vrs_epochs": 0,
                  "correction_latency_p50_s": None, "correction_latency_p99_s": None, "base_moves": 0,
-                 "base_resets": 0, "balises": [], "errors": 0, "holds_fix": False},
+                 "base_resets": 0, "balises": [], "errors": 0, "holds_fix": False, "along_pl_p50_m": None,
+                 "cross_pl_p50_m": None, "correction_along_p50_m": None, "unbounded_epochs": 0},
     },
     "alarms": ALARMS, "rbc": RBC,
     "caster": {"port": 2101, "counters": {"requests": 10, "rejected": 1},
