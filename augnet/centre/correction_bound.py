@@ -178,6 +178,10 @@ class CorrectionBound:
         # stations is interpolated too, and an end station's extrapolation error says little about that
         self._inner: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=window_epochs)
         self._noise: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=window_epochs)
+        # each station's residual per metre of its baseline to the master (and per ppm of level): the field's
+        # own gradient, for the satellites a VRS sends uncorrected (the master's observations shifted, whose
+        # error is the whole DD atmosphere between the point and its master, decision 0281)
+        self._gradient: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=window_epochs)
         self._last: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # (station E/N, sats, residuals)
 
     def update(self, station_en: np.ndarray, residuals: np.ndarray, sats, master: int = 0,
@@ -215,7 +219,12 @@ class CorrectionBound:
         ref = np.all((v == 0.0) | ~np.isfinite(v), axis=0)
         z = np.where(ref[None, :], np.nan, z)
         noise[:, ref] = np.nan
+        base = np.linalg.norm(en - en[master], axis=1)
+        far = (base > MIN_GEOMETRY_DISTANCE_M)[:, None] & ~ref[None, :]
+        grad = np.where(far, v / (np.maximum(base, MIN_GEOMETRY_DISTANCE_M)[:, None] * self._level(ionosphere_level_ppm)),
+                        np.nan)
         self._window.append((sats, z))
+        self._gradient.append((sats, grad))
         self._inner.append((sats, np.where(inner[:, None], z, np.nan)))
         self._noise.append((sats, noise))
         return z
@@ -300,6 +309,18 @@ class CorrectionBound:
         normalised = np.where(inside[:, None], self.interpolated_sigma(sats)[None, :],
                               self.normalised_sigma(sats)[None, :])
         field = geom[:, None] * self._level(ionosphere_level_ppm) * normalised
+        return np.hypot(field, self.noise_sigma(sats)[None, :])
+
+    def uncorrected_sigma(self, distance_m, sats, ionosphere_level_ppm: float | None = None) -> np.ndarray:
+        """Overbound sigma [m] of the error of satellites a VRS sends without network corrections (its master's
+        observations shifted to the point): the DD atmosphere over `distance_m` (T,) to that master (floored
+        at `MIN_GEOMETRY_DISTANCE_M`), from the overbound of the stations' residual per metre of baseline,
+        plus the noise term (T x S); NaN before `min_window_epochs`."""
+        d = np.atleast_1d(np.asarray(distance_m, dtype=float))
+        if len(self._window) < self.min_window_epochs:
+            return np.full((d.size, len(sats)), np.nan)
+        geom = np.maximum(d, MIN_GEOMETRY_DISTANCE_M)
+        field = geom[:, None] * self._level(ionosphere_level_ppm) * self._overbound(sats, self._gradient)[None, :]
         return np.hypot(field, self.noise_sigma(sats)[None, :])
 
     def bound(self, station_en: np.ndarray, train_en: np.ndarray, sats,

@@ -426,9 +426,14 @@ class CentreEngine:
         except Exception:  # noqa: BLE001 - sent as "none" (16383): the rover treats the corrections as unbounded
             log.exception("correction bound not computed at %s", vrs.t_gpst)
             return np.full((len(vrs.points_ecef_m), len(vrs.sats)), np.nan), float("nan")
-        # satellites sent without network corrections (near the master) carry the master's own residual
-        # atmosphere, not an interpolation error this bound speaks for: no bound for them
-        return np.where(vrs.corrected, sigma, np.nan), level
+        try:
+            # satellites sent without network corrections (near the master) carry the whole DD atmosphere
+            # between the point and its master, not an interpolation error: the field's gradient bounds them
+            plain = self.correction_bound.uncorrected_sigma(vrs.distance_to_master_m, vrs.sats, level)
+        except Exception:  # noqa: BLE001 - as above
+            log.exception("correction bound of uncorrected satellites not computed at %s", vrs.t_gpst)
+            plain = np.full(sigma.shape, np.nan)
+        return np.where(vrs.corrected, sigma, plain), level
 
     def _admit(self, ids: list[str], ne: NetworkEpoch, vrs: VrsEpoch) -> None:
         """Each session's admission decision on its VRS epoch, in place: in a network VRS the corrected satellites
