@@ -183,6 +183,9 @@ class CorrectionBound:
         # error is the whole DD atmosphere between the point and its master, decision 0281)
         self._gradient: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=window_epochs)
         self._last: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # (station E/N, sats, residuals)
+        # per window and pooling: {satellite: overbound sigma} and the default for others, as of the last
+        # update (the window changes once per epoch; every train and group of an epoch reads the same)
+        self._tables: dict[tuple[int, bool], tuple[dict[str, float], float]] = {}
 
     def update(self, station_en: np.ndarray, residuals: np.ndarray, sats, master: int = 0,
                ionosphere_level_ppm: float | None = None, model=None) -> np.ndarray:
@@ -223,6 +226,7 @@ class CorrectionBound:
         far = (base > MIN_GEOMETRY_DISTANCE_M)[:, None] & ~ref[None, :]
         grad = np.where(far, v / (np.maximum(base, MIN_GEOMETRY_DISTANCE_M)[:, None] * self._level(ionosphere_level_ppm)),
                         np.nan)
+        self._tables.clear()
         self._window.append((sats, z))
         self._gradient.append((sats, grad))
         self._inner.append((sats, np.where(inner[:, None], z, np.nan)))
@@ -270,17 +274,32 @@ class CorrectionBound:
     def _overbound(self, sats, window, pool: bool = True) -> np.ndarray:
         """Overbound sigma per satellite of a window's samples; pooled over all satellites where one has too
         few samples (`pool`; else NaN there), NaN when the whole window has too few."""
-        x = self.samples(sats, window)
-        sigma = overbound_sigma(x) if x.size else np.full(len(sats), np.nan)
-        counts = np.isfinite(x).sum(axis=0)
+        table, default = self._table(window, pool)
+        return np.array([table.get(str(x), default) for x in sats], dtype=float)
+
+    def _table(self, window, pool: bool) -> tuple[dict[str, float], float]:
+        """Every satellite's overbound of `window`, computed once per update (cached)."""
+        key = (id(window), pool)
+        got = self._tables.get(key)
+        if got is not None:
+            return got
+        names = sorted({str(x) for s_w, _ in window for x in s_w})
+        x = self.samples(names, window)
+        sigma = overbound_sigma(x) if x.size and names else np.full(len(names), np.nan)
+        counts = np.isfinite(x).sum(axis=0) if x.size else np.zeros(len(names), int)
         few = counts < self.min_samples
-        if few.any() and not pool:
-            return np.where(few, np.nan, sigma)
-        if few.any():
+        default = np.nan
+        if pool:
             everything = np.concatenate([z[np.isfinite(z)] for _, z in window]) if window else np.zeros(0)
-            pooled = overbound_sigma(everything[:, None])[0] if everything.size >= self.min_samples else np.nan
-            sigma = np.where(few, pooled, sigma)
-        return sigma
+            default = overbound_sigma(everything[:, None])[0] if everything.size >= self.min_samples else np.nan
+        sigma = np.where(few, default, sigma)
+        out = self._tables[key] = ({n: float(v) for n, v in zip(names, sigma)}, float(default))
+        return out
+
+    def warm(self) -> None:
+        """Compute this epoch's overbounds now (after `update`, off the path that serves the VRS)."""
+        for window, pool in ((self._window, True), (self._inner, False), (self._noise, True), (self._gradient, True)):
+            self._table(window, pool)
 
     def normalised_sigma(self, sats) -> np.ndarray:
         """Overbound sigma of the normalised leave-one-out error per satellite (S,) [m per m per ppm]."""

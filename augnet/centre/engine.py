@@ -353,6 +353,8 @@ class CentreEngine:
             try:
                 self.correction_bound.update(ne.station_en_m, correction_residuals(ne.dd_iono_m, ne.dd_trop_m),
                                              ne.sats, 0, ionosphere_level_ppm(ne.station_en_m, ne.dd_iono_m, 0))
+                if self.encoder.sends_bound():  # the overbounds now, not while the next epoch's VRS wait for them
+                    self.correction_bound.warm()
             except Exception:  # noqa: BLE001 - the bound failing must not stop the VRS: its receivers get "none"
                 log.exception("correction bound not updated at %s", t)
         if self._prev is not None and 0.0 < t - self._prev.t_gpst <= MAX_CORRECTION_LAG_S:
