@@ -8,6 +8,7 @@ import asyncio
 import time
 
 import numpy as np
+import pytest
 
 from augnet.onboard.balise_timer import BaliseGroup, TimedBaliseDetector
 from augnet.system.atp_link import AtpConnection
@@ -27,6 +28,7 @@ def _drive(det: TimedBaliseDetector, until_s: float, outage) -> None:
         det.tick(t)
 
 
+@pytest.mark.slow  # real-time link cycles (~5 s), as tests/onboard/test_balise_timer.py's RSSP-I test
 def test_passages_and_a_service_brake_reach_the_atp_over_rssp1():
     async def main():
         conn = AtpConnection(1, GROUPS)
