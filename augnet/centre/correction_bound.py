@@ -116,6 +116,36 @@ def held_out_distance(station_en: np.ndarray) -> np.ndarray:
     return d.min(axis=1)
 
 
+def line_axis(station_en: np.ndarray) -> np.ndarray:
+    """Unit vector of the stations' main direction in E/N (their first principal axis): the line's."""
+    en = np.asarray(station_en, dtype=float)
+    if en.shape[0] < 2:
+        return np.array([1.0, 0.0])
+    _, _, vt = np.linalg.svd(en - en.mean(axis=0), full_matrices=False)
+    return vt[0]
+
+
+def bracketed_stations(station_en: np.ndarray) -> np.ndarray:
+    """(N,) each station has other stations on both sides of it along the line: held out, it is interpolated;
+    an end station held out is extrapolated (decision 0281)."""
+    en = np.asarray(station_en, dtype=float)
+    u = en @ line_axis(en)
+    out = np.zeros(len(u), bool)
+    for k in range(len(u)):
+        others = np.delete(u, k)
+        out[k] = others.size >= 2 and others.min() < u[k] < others.max()
+    return out
+
+
+def bracketed_points(station_en: np.ndarray, points_en: np.ndarray) -> np.ndarray:
+    """(P,) each point lies between the end stations along the line (its corrections are interpolated)."""
+    en = np.asarray(station_en, dtype=float)
+    axis = line_axis(en)
+    u = en @ axis
+    p = np.atleast_2d(np.asarray(points_en, dtype=float)) @ axis
+    return (p >= u.min()) & (p <= u.max())
+
+
 def ionosphere_level_ppm(station_en: np.ndarray, iono_residuals: np.ndarray, master: int = 0) -> float:
     """RMS DD ionosphere residual per unit baseline to the master [ppm]: the epoch's ionosphere level.
 
@@ -144,8 +174,18 @@ class CorrectionBound:
         self.window_epochs = window_epochs
         self.min_samples = min_samples
         self._window: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=window_epochs)
+        # the same samples from bracketed stations only (interpolated when held out): a train between the end
+        # stations is interpolated too, and an end station's extrapolation error says little about that
+        self._inner: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=window_epochs)
         self._noise: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=window_epochs)
+        # each station's residual per metre of its baseline to the master (and per ppm of level): the field's
+        # own gradient, for the satellites a VRS sends uncorrected (the master's observations shifted, whose
+        # error is the whole DD atmosphere between the point and its master, decision 0281)
+        self._gradient: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=window_epochs)
         self._last: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # (station E/N, sats, residuals)
+        # per window and pooling: {satellite: overbound sigma} and the default for others, as of the last
+        # update (the window changes once per epoch; every train and group of an epoch reads the same)
+        self._tables: dict[tuple[int, bool], tuple[dict[str, float], float]] = {}
 
     def update(self, station_en: np.ndarray, residuals: np.ndarray, sats, master: int = 0,
                ionosphere_level_ppm: float | None = None, model=None) -> np.ndarray:
@@ -161,9 +201,11 @@ class CorrectionBound:
                 f"{sats.size}")
         if not 0 <= master < en.shape[0]:
             raise CorrectionBoundError(f"master row {master} outside the {en.shape[0]} stations")
+        inner = np.zeros(en.shape[0], bool)
         if en.shape[0] < 3:  # holding one out leaves a single station beside the master: no interpolation
             z = np.full(v.shape, np.nan)
         else:
+            inner = bracketed_stations(en)
             err = interpolation.leave_one_out(en, v, model, master)
             # the held-out station beyond the along-line model's cross-line limit (an end station of a bent
             # 3-station line) gets no prediction: take inverse-distance weights there, a coarser model whose
@@ -180,7 +222,14 @@ class CorrectionBound:
         ref = np.all((v == 0.0) | ~np.isfinite(v), axis=0)
         z = np.where(ref[None, :], np.nan, z)
         noise[:, ref] = np.nan
+        base = np.linalg.norm(en - en[master], axis=1)
+        far = (base > MIN_GEOMETRY_DISTANCE_M)[:, None] & ~ref[None, :]
+        grad = np.where(far, v / (np.maximum(base, MIN_GEOMETRY_DISTANCE_M)[:, None] * self._level(ionosphere_level_ppm)),
+                        np.nan)
+        self._tables.clear()
         self._window.append((sats, z))
+        self._gradient.append((sats, grad))
+        self._inner.append((sats, np.where(inner[:, None], z, np.nan)))
         self._noise.append((sats, noise))
         return z
 
@@ -222,22 +271,45 @@ class CorrectionBound:
             rows.append(block)
         return np.vstack(rows)
 
-    def _overbound(self, sats, window) -> np.ndarray:
+    def _overbound(self, sats, window, pool: bool = True) -> np.ndarray:
         """Overbound sigma per satellite of a window's samples; pooled over all satellites where one has too
-        few samples, NaN when the whole window has too few."""
-        x = self.samples(sats, window)
-        sigma = overbound_sigma(x) if x.size else np.full(len(sats), np.nan)
-        counts = np.isfinite(x).sum(axis=0)
+        few samples (`pool`; else NaN there), NaN when the whole window has too few."""
+        table, default = self._table(window, pool)
+        return np.array([table.get(str(x), default) for x in sats], dtype=float)
+
+    def _table(self, window, pool: bool) -> tuple[dict[str, float], float]:
+        """Every satellite's overbound of `window`, computed once per update (cached)."""
+        key = (id(window), pool)
+        got = self._tables.get(key)
+        if got is not None:
+            return got
+        names = sorted({str(x) for s_w, _ in window for x in s_w})
+        x = self.samples(names, window)
+        sigma = overbound_sigma(x) if x.size and names else np.full(len(names), np.nan)
+        counts = np.isfinite(x).sum(axis=0) if x.size else np.zeros(len(names), int)
         few = counts < self.min_samples
-        if few.any():
+        default = np.nan
+        if pool:
             everything = np.concatenate([z[np.isfinite(z)] for _, z in window]) if window else np.zeros(0)
-            pooled = overbound_sigma(everything[:, None])[0] if everything.size >= self.min_samples else np.nan
-            sigma = np.where(few, pooled, sigma)
-        return sigma
+            default = overbound_sigma(everything[:, None])[0] if everything.size >= self.min_samples else np.nan
+        sigma = np.where(few, default, sigma)
+        out = self._tables[key] = ({n: float(v) for n, v in zip(names, sigma)}, float(default))
+        return out
+
+    def warm(self) -> None:
+        """Compute this epoch's overbounds now (after `update`, off the path that serves the VRS)."""
+        for window, pool in ((self._window, True), (self._inner, False), (self._noise, True), (self._gradient, True)):
+            self._table(window, pool)
 
     def normalised_sigma(self, sats) -> np.ndarray:
         """Overbound sigma of the normalised leave-one-out error per satellite (S,) [m per m per ppm]."""
         return self._overbound(sats, self._window)
+
+    def interpolated_sigma(self, sats) -> np.ndarray:
+        """The same from the bracketed stations' samples only, where a satellite has `min_samples` of them; the
+        whole window's elsewhere (S,)."""
+        own = self._overbound(sats, self._inner, pool=False)
+        return np.where(np.isfinite(own), own, self.normalised_sigma(sats))
 
     def noise_sigma(self, sats) -> np.ndarray:
         """Overbound sigma [m] of the station residuals' own noise per satellite (S,)."""
@@ -250,7 +322,24 @@ class CorrectionBound:
         if len(self._window) < self.min_window_epochs:
             return np.full((np.atleast_2d(train_en).shape[0], len(sats)), np.nan)
         geom = np.maximum(nearest_station_distance(station_en, train_en), MIN_GEOMETRY_DISTANCE_M)
-        field = geom[:, None] * self._level(ionosphere_level_ppm) * self.normalised_sigma(sats)[None, :]
+        # a train between the end stations is interpolated: its errors are overbounded by the interpolated
+        # (bracketed) held-out samples; one beyond them is extrapolated, like an end station held out
+        inside = bracketed_points(station_en, train_en)
+        normalised = np.where(inside[:, None], self.interpolated_sigma(sats)[None, :],
+                              self.normalised_sigma(sats)[None, :])
+        field = geom[:, None] * self._level(ionosphere_level_ppm) * normalised
+        return np.hypot(field, self.noise_sigma(sats)[None, :])
+
+    def uncorrected_sigma(self, distance_m, sats, ionosphere_level_ppm: float | None = None) -> np.ndarray:
+        """Overbound sigma [m] of the error of satellites a VRS sends without network corrections (its master's
+        observations shifted to the point): the DD atmosphere over `distance_m` (T,) to that master (floored
+        at `MIN_GEOMETRY_DISTANCE_M`), from the overbound of the stations' residual per metre of baseline,
+        plus the noise term (T x S); NaN before `min_window_epochs`."""
+        d = np.atleast_1d(np.asarray(distance_m, dtype=float))
+        if len(self._window) < self.min_window_epochs:
+            return np.full((d.size, len(sats)), np.nan)
+        geom = np.maximum(d, MIN_GEOMETRY_DISTANCE_M)
+        field = geom[:, None] * self._level(ionosphere_level_ppm) * self._overbound(sats, self._gradient)[None, :]
         return np.hypot(field, self.noise_sigma(sats)[None, :])
 
     def bound(self, station_en: np.ndarray, train_en: np.ndarray, sats,

@@ -99,7 +99,8 @@ class CentreEngine:
                  ephemerides: list[Ephemeris] | None = None, msm_level: int = 7,
                  vrs_before_network: bool = True, antex: AntexFile | str | None = None,
                  antenna_types: dict[str, str] | None = None, area: AreaConfig | None = None,
-                 admission: AdmissionConfig | None = None, correction_bound: bool = False):
+                 admission: AdmissionConfig | None = None, correction_bound: bool = False,
+                 estimate_correction_bound: bool | None = None):
         self.network_name = network_name
         self.antex = read_antex(antex) if isinstance(antex, (str, bytes)) or hasattr(antex, "__fspath__") else antex
         self.antenna_types: dict[str, str] = {}  # station -> antenna type in use (1033 or configured)
@@ -119,7 +120,10 @@ class CentreEngine:
         self.encoder = VrsStreamEncoder(msm_level, send_correction_bound=correction_bound)
         # the centre's bound on its correction error, sent as 4001 after each VRS epoch: opt-in (default off,
         # docs/correction-bound-message.md), so a stream without it is byte for byte what it was
-        self.correction_bound = CorrectionBound() if correction_bound else None
+        # `estimate_correction_bound` alone (`augnet up`): the bound is estimated, but sent only to the sessions
+        # of a mountpoint that opted in (`set_session_bound`, decision 0281)
+        estimate = correction_bound if estimate_correction_bound is None else estimate_correction_bound
+        self.correction_bound = CorrectionBound() if estimate or correction_bound else None
         self.admission = AdmissionBatch(admission)  # per session: when newly corrected satellites enter its VRS
         self.sessions: dict[str, Session] = {}
         self._station_ids = itertools.count(FIRST_VRS_STATION_ID)
@@ -313,6 +317,11 @@ class CentreEngine:
                 "kind": kind, "subject": subject, "severity": severity, "message": message,
                 "t_gpst": None, "cleared": cleared}).encode()))
 
+    def set_session_bound(self, client_id: str, send: bool) -> None:
+        """The session's VRS carry the 4001 correction-error bound from its next epoch (`send`) or not."""
+        if client_id in self.sessions:
+            self.encoder.set_send_bound(client_id, bool(send))
+
     def close_session(self, client_id: str) -> None:
         self.sessions.pop(client_id, None)
         self.encoder.remove(client_id)
@@ -341,8 +350,13 @@ class CentreEngine:
             vrs = self._serve(ids, prev, eps)
         ne = self.network.update(eps, self.nav)
         if self.correction_bound is not None and len(ne.stations):
-            self.correction_bound.update(ne.station_en_m, correction_residuals(ne.dd_iono_m, ne.dd_trop_m),
-                                         ne.sats, 0, ionosphere_level_ppm(ne.station_en_m, ne.dd_iono_m, 0))
+            try:
+                self.correction_bound.update(ne.station_en_m, correction_residuals(ne.dd_iono_m, ne.dd_trop_m),
+                                             ne.sats, 0, ionosphere_level_ppm(ne.station_en_m, ne.dd_iono_m, 0))
+                if self.encoder.sends_bound():  # the overbounds now, not while the next epoch's VRS wait for them
+                    self.correction_bound.warm()
+            except Exception:  # noqa: BLE001 - the bound failing must not stop the VRS: its receivers get "none"
+                log.exception("correction bound not updated at %s", t)
         if self._prev is not None and 0.0 < t - self._prev.t_gpst <= MAX_CORRECTION_LAG_S:
             self._interval_s = t - self._prev.t_gpst
         self._prev = ne
@@ -404,15 +418,24 @@ class CentreEngine:
 
     def _bound_sigma(self, ne: NetworkEpoch, vrs: VrsEpoch) -> tuple[np.ndarray | None, float]:
         """Overbound sigma [m] of the correction error per session and VRS satellite (None when not sent)."""
-        if self.correction_bound is None or not len(ne.stations):
+        if self.correction_bound is None or not len(ne.stations) or not self.encoder.sends_bound():
             return None, float("nan")
-        origin = ne.station_xyz_m[0]
-        rover_en = ecef_to_enu(vrs.points_ecef_m - origin, origin)[:, :2]
-        level = ionosphere_level_ppm(ne.station_en_m, ne.dd_iono_m, 0)
-        sigma = self.correction_bound.sigma(ne.station_en_m, rover_en, vrs.sats, level)
-        # satellites sent without network corrections (near the master) carry the master's own residual
-        # atmosphere, not an interpolation error this bound speaks for: no bound for them
-        return np.where(vrs.corrected, sigma, np.nan), level
+        try:
+            origin = ne.station_xyz_m[0]
+            rover_en = ecef_to_enu(vrs.points_ecef_m - origin, origin)[:, :2]
+            level = ionosphere_level_ppm(ne.station_en_m, ne.dd_iono_m, 0)
+            sigma = self.correction_bound.sigma(ne.station_en_m, rover_en, vrs.sats, level)
+        except Exception:  # noqa: BLE001 - sent as "none" (16383): the rover treats the corrections as unbounded
+            log.exception("correction bound not computed at %s", vrs.t_gpst)
+            return np.full((len(vrs.points_ecef_m), len(vrs.sats)), np.nan), float("nan")
+        try:
+            # satellites sent without network corrections (near the master) carry the whole DD atmosphere
+            # between the point and its master, not an interpolation error: the field's gradient bounds them
+            plain = self.correction_bound.uncorrected_sigma(vrs.distance_to_master_m, vrs.sats, level)
+        except Exception:  # noqa: BLE001 - as above
+            log.exception("correction bound of uncorrected satellites not computed at %s", vrs.t_gpst)
+            plain = np.full(sigma.shape, np.nan)
+        return np.where(vrs.corrected, sigma, plain), level
 
     def _admit(self, ids: list[str], ne: NetworkEpoch, vrs: VrsEpoch) -> None:
         """Each session's admission decision on its VRS epoch, in place: in a network VRS the corrected satellites

@@ -62,6 +62,7 @@ class Client:
     last_arp: float = -np.inf
     last_eph: float = -np.inf
     moved: bool = True
+    send_bound: bool | None = None  # 4001 for this client: None = the encoder's `send_correction_bound`
     station_frames: bytes = b""  # framed 1006 + 1033, encoded when the point is set (resent from here)
     descriptor_frame: bytes = b""  # framed 1033 (the station id's: encoded once)
 
@@ -123,6 +124,17 @@ class VrsStreamEncoder:
         c.descriptor_frame = encode_frame(descriptor_message(station_id, f"VRS{station_id}", VRS_ANTENNA,
                                                              VRS_RECEIVER, FIRMWARE))
         self._station_frames(c)
+
+    def sends_bound(self) -> bool:
+        """Any client's streams carry the 4001 bound."""
+        if self.send_correction_bound:
+            return any(c.send_bound is not False for c in self.clients.values())
+        return any(c.send_bound for c in self.clients.values())
+
+    def set_send_bound(self, client_id: str, send: bool | None) -> None:
+        """This client's streams carry the 4001 bound (True), do not (False), or follow the encoder (None):
+        its mountpoint's opt-in (decision 0281)."""
+        self.clients[client_id].send_bound = send
 
     def move(self, client_id: str, point_ecef) -> None:
         c = self.clients[client_id]
@@ -222,12 +234,15 @@ class VrsStreamEncoder:
             buf = out[cid]
             for data, off in views:
                 buf += data[off[i]:off[i + 1]]
-        if self.send_correction_bound and bound_sigma_m is not None:
-            self._bound_frames(ids, vrs, ctx, np.asarray(bound_sigma_m, float), ionosphere_level_ppm, out)
+        if bound_sigma_m is not None:
+            on = [self.send_correction_bound if self.clients[c].send_bound is None else self.clients[c].send_bound
+                  for c in ids]
+            if any(on):
+                self._bound_frames(ids, vrs, ctx, np.asarray(bound_sigma_m, float), ionosphere_level_ppm, out, on)
         return {cid: bytes(b) for cid, b in out.items()}
 
     def _bound_frames(self, ids, vrs: VrsEpoch, ctx: "_EpochContext", sigma: np.ndarray, level: float,
-                      out: dict) -> None:
+                      out: dict, on: list[bool]) -> None:
         """Append each client's 4001 (several when it carries more than MAX_SATELLITES satellites)."""
         if sigma.shape != (len(ids), len(vrs.sats)):
             raise ValueError(f"bound sigma of shape {sigma.shape}, expected {(len(ids), len(vrs.sats))}")
@@ -235,6 +250,8 @@ class VrsStreamEncoder:
             np.array([str(x)[0] for x in vrs.sats]), list(ctx.systems))[None, :]
         epoch = msm_epoch_ms("G", vrs.t_gpst)
         for i, cid in enumerate(ids):
+            if not on[i]:
+                continue
             cols = np.flatnonzero(sent[i])
             c = self.clients[cid]
             for a in range(0, len(cols), MAX_SATELLITES):

@@ -208,6 +208,7 @@ class MountpointIn(Request):
     format: Annotated[str, StringConstraints(min_length=1, max_length=32)] = "RTCM 3.3"
     read_groups: Groups = ""
     write_groups: Groups = ""
+    correction_bound: bool = False  # its VRS streams carry the RTCM 4001 correction-error bound (decision 0281)
 
 
 class MountpointPatch(Request):
@@ -216,6 +217,7 @@ class MountpointPatch(Request):
     read_groups: Groups | None = None
     write_groups: Groups | None = None
     enabled: bool | None = None
+    correction_bound: bool | None = None
 
 
 class MountpointOut(BaseModel):
@@ -225,6 +227,7 @@ class MountpointOut(BaseModel):
     read_groups: str | None
     write_groups: str | None
     enabled: bool
+    correction_bound: bool | None  # None: not in the store
     in_store: bool
     stats: dict[str, Any] | None  # the running caster's counters for it (None: caster not running here)
 

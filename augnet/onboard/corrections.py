@@ -22,7 +22,9 @@ import numpy as np
 from augnet.gnss import time as gtime
 from augnet.gnss.constants import SECONDS_PER_WEEK
 from augnet.gnss.rtcm import MsmMessage, RtcmMessage, RtcmStreamReader, decode, msm_to_observables
+from augnet.gnss.rtcm.correction_bound import CORRECTION_BOUND_MESSAGE, decode_correction_bound
 from augnet.gnss.signals import UnknownSignal, by_msm
+from augnet.onboard.correction_bound import CorrectionBounds
 from augnet.onboard.observations import (
     ATTRIBUTE_PRIORITY,
     BAND_FREQ_HZ,
@@ -62,6 +64,7 @@ class CorrectionDecoder:
         self.station_id: int | None = None
         self.base_non_physical = False
         self.last_epoch: EpochObs | None = None
+        self.bounds = CorrectionBounds()  # the centre's 4001 correction-error bounds on this stream
         self._pending: dict[float, list] = {}
         self._lock_prev: dict[tuple[str, str], float] = {}
 
@@ -82,6 +85,9 @@ class CorrectionDecoder:
             self.stats.frames += 1
             self.stats.by_type[fr.msg_type] = self.stats.by_type.get(fr.msg_type, 0) + 1
             try:
+                if fr.msg_type == CORRECTION_BOUND_MESSAGE:
+                    self.bounds.add(decode_correction_bound(fr.payload))
+                    continue
                 msg = decode(fr)
             except Exception:  # noqa: BLE001 - corrupt payload with a good CRC
                 self.stats.decode_errors += 1

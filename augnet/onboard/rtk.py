@@ -51,6 +51,7 @@ from augnet.gnss.ephemeris import NavigationData
 from augnet.gnss.fix_confirmation import FixConfirmation, IntegerDecision
 from augnet.gnss.state_layout import StateLayout
 from augnet.onboard import correction_age, ionosphere_prior
+from augnet.onboard.correction_bound import DDGeometry
 from augnet.onboard.cycleslip import BASE_GF_DRIFT_M_S, BASE_GF_SLIP_THRESHOLD_M, BASE_MAX_ARC_GAP_S, SlipDetector
 from augnet.onboard.double_difference import (
     AMB_KNOWN_SIGMA_CYC,
@@ -349,6 +350,7 @@ class RtkFilter:
         self._last_solution: tuple[float, np.ndarray, np.ndarray] | None = None
         self._spp_inputs: tuple | None = None
         self.initialised = False
+        self.geometry: DDGeometry | None = None
         self.t_prev = math.nan
         self.rover_slips = SlipDetector()
         self.base_slips = SlipDetector(max_gap_s=BASE_MAX_ARC_GAP_S, gf_threshold_m=BASE_GF_SLIP_THRESHOLD_M,
@@ -423,6 +425,7 @@ class RtkFilter:
             return RtkSolution(math.nan, Status.NONE, np.full(3, np.nan), np.full((3, 3), np.nan),
                                message="rover epoch without a valid time")
         rover = rover.sanitised()
+        self.geometry = None  # this epoch's DD rows, when it is an RTK epoch (the 4001 bound's gain)
         if base is not None:
             base = base.sanitised() if np.isfinite(base.time) else None
         try:
@@ -595,6 +598,8 @@ class RtkFilter:
         dd, rows, keep = self._screened_rows(ep, dd, groups, sd, x_rov, var_sd)
         x_rov, sd, rows = self._at_phase_position(ep, dd, rows, sd, x_rov, var_sd, keep)
         x_rov, sd = self._iterated_update(ep, dd, rows, sd, x_rov, var_sd, keep)
+        self.geometry = DDGeometry(list(ep.sats), sd.los.copy(), dd.k.copy(), dd.ref.copy(), dd.f.copy(),
+                                   dd.group.copy(), var_sd.copy(), np.asarray(ep.mu, float).copy())
         self._mark_observed(groups, ep.sats, t)
         sol = self._float_solution(t, n_sat_used, age)
         failure = self._float_failure(sol, spp)

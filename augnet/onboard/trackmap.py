@@ -43,6 +43,7 @@ import numpy as np
 
 from augnet.gnss.geometry import ecef_to_geodetic, enu_rotation, geodetic_deg_to_ecef
 from augnet.onboard.integrity_allocation import ALLOCATED_PER_DECISION_RISK, gaussian_k  # noqa: F401 (re-export)
+from augnet.onboard.integrity_allocation import correction_sigma_on_axis
 
 FORMAT = "augnet-trackmap/1"
 # Fault-free integrity risk per independent decision: the Helmet 1e-9/h split over the decisions of an
@@ -101,6 +102,9 @@ class MapMatch:
     nearest_other_m: float  # cross-track distance to the nearest other candidate track [m]
     candidates: dict[str, float] = field(default_factory=dict)  # track id -> cross offset [m]
     message: str = ""
+    # the centre's correction-error sigma carried to each axis [m] (RTCM 4001; 0: none received, inf: unbounded)
+    correction_along_m: float = 0.0
+    correction_cross_m: float = 0.0
 
 
 class TrackDatabase:
@@ -239,8 +243,13 @@ class TrackDatabase:
     # map matching
 
     def match(self, position_m, covariance_m2=None, integrity_risk: float = DEFAULT_INTEGRITY_RISK,
-              gate_m: float = DEFAULT_MATCH_GATE_M) -> MapMatch:
-        """Match an ECEF antenna position (with its 3x3 ECEF covariance) to the track map."""
+              gate_m: float = DEFAULT_MATCH_GATE_M, correction_gain=None, correction_sigma_m=None) -> MapMatch:
+        """Match an ECEF antenna position (with its 3x3 ECEF covariance) to the track map.
+
+        `correction_sigma_m` (S,): the centre's 4001 overbound sigmas of the satellites' correction errors,
+        `correction_gain` (3, S): the position's ECEF gain on them (`correction_bound.dd_position_gain`);
+        their sigma on each axis inflates that axis's in quadrature before K (decision 0280). A sigma
+        without a usable gain, or a used satellite without a sigma (NaN), makes the PLs infinite."""
         p = np.asarray(position_m, dtype=float)
         if p.shape != (3,) or not np.all(np.isfinite(p)):
             return _off_map("no valid position")
@@ -285,15 +294,24 @@ class TrackDatabase:
             C = np.asarray(covariance_m2, dtype=float)
             sig_a = math.sqrt(max(float(self._T[j] @ C @ self._T[j]), 0.0))
             sig_c = math.sqrt(max(float(self._N[j] @ C @ self._N[j]), 0.0))
+        corr_a = corr_c = 0.0
+        if correction_sigma_m is not None:
+            g = None if correction_gain is None else np.asarray(correction_gain, dtype=float)
+            if g is None or not np.all(np.isfinite(g)):
+                corr_a = corr_c = math.inf
+            else:
+                corr_a = float(correction_sigma_on_axis(self._T[j] @ g, correction_sigma_m))
+                corr_c = float(correction_sigma_on_axis(self._N[j] @ g, correction_sigma_m))
         k = gaussian_k(integrity_risk)
-        apl, xpl = k * sig_a, k * sig_c
+        apl, xpl = k * math.hypot(sig_a, corr_a), k * math.hypot(sig_c, corr_c)
         # confirmed when the protection region around the estimate stays on this track's side of the
         # midline to every other track
         confirmed = bool(math.isfinite(xpl) and (abs(c) + xpl < 0.5 * nearest_other if others else xpl < gate_m))
         msg = "track confirmed" if confirmed else (
             f"track not confirmed: cross-track PL {xpl:.2f} m against {nearest_other:.2f} m to the next track")
         km = float(self._km0[j] + (self._km1[j] - self._km0[j]) * u[j] / self._len[j])
-        return MapMatch(tid, tr.line, km, along, c, vertical, apl, xpl, confirmed, nearest_other, near, msg)
+        return MapMatch(tid, tr.line, km, along, c, vertical, apl, xpl, confirmed, nearest_other, near, msg,
+                        corr_a, corr_c)
 
 
 def _off_map(msg: str) -> MapMatch:

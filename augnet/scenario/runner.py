@@ -210,6 +210,9 @@ class TrainLog:
     confirmed: list[bool] = field(default_factory=list)
     along_pl_m: list[float] = field(default_factory=list)
     cross_pl_m: list[float] = field(default_factory=list)
+    # the centre's 4001 correction-error sigma on each axis in those PLs [m] (0: none received, inf: unbounded)
+    correction_along_m: list[float] = field(default_factory=list)
+    correction_cross_m: list[float] = field(default_factory=list)
     message: list[str] = field(default_factory=list)
     truth_position: list[np.ndarray] = field(default_factory=list)  # truth, ECEF
     truth_km: list[float] = field(default_factory=list)  # truth chainage of the antenna
@@ -284,7 +287,8 @@ class _Train:
 class Chain:
     """The system under test wired in-process, fed one simulator block at a time."""
 
-    def __init__(self, world: WarmUpWorld, scenario: Scenario, options: RtkOptions | None = None):
+    def __init__(self, world: WarmUpWorld, scenario: Scenario, options: RtkOptions | None = None,
+                 correction_bound: bool = False):
         self.world = world
         self.scenario = sc = scenario
         self.t0 = world.start_gpst  # the scenario's start: the trains' time 0
@@ -303,7 +307,8 @@ class Chain:
         self.stations = {r.id: r.ecef[0].copy() for r in rx if r.id in self.station_names}
         self.check_points = {r.id: r.ecef[0].copy() for r in rx
                              if r.kind == "station" and r.id.startswith(CHECK_POINT_PREFIX)}
-        self.engine = CentreEngine(self.stations, world.t0, network_name=sc.name)
+        # correction_bound: the VRS carry the centre's 4001 bound, which the trains take into their PLs (0281)
+        self.engine = CentreEngine(self.stations, world.t0, network_name=sc.name, correction_bound=correction_bound)
         self.track_db = TrackDatabase.from_dict(track_database(sc)) if sc.line is not None else None
         self.trains: dict[str, _Train] = {}
         # the simulated odometers (world clock, so an odometer_slide keeps its scenario time); truth kept inside
@@ -519,7 +524,7 @@ class Chain:
                     log.vrs_moves += 1
                 tr.base = ep
         rover = self.rover_obs.epoch(blk, e, tr.row)
-        out = tr.unit.step(rover, tr.base)
+        out = tr.unit.step(rover, tr.base, tr.decoder.bounds)
         sol, m = out.solution, out.match
         log.t_s.append(t - self.t0)
         log.status.append(int(sol.status))
@@ -535,6 +540,8 @@ class Chain:
         log.confirmed.append(bool(m is not None and m.confirmed))
         log.along_pl_m.append(m.along_pl_m if m is not None else math.inf)
         log.cross_pl_m.append(m.cross_pl_m if m is not None else math.inf)
+        log.correction_along_m.append(m.correction_along_m if m is not None else 0.0)
+        log.correction_cross_m.append(m.correction_cross_m if m is not None else 0.0)
         log.message.append(sol.message)
         log.truth_position.append(blk.rx_ecef[e, tr.row].copy())
         log.truth_km.append(float(self.world.receivers[tr.row].km[int(blk.epoch_index[e])]))
@@ -615,14 +622,14 @@ class Chain:
 
 def simulate(scenario: str | Path | Scenario, *, duration_s: float | None = None,
              on_epoch: Callable[[], None] | None = None, options: RtkOptions | None = None,
-             warm_up_s: float | None = None) -> RunLog:
+             warm_up_s: float | None = None, correction_bound: bool = False) -> RunLog:
     """Run the chain over the warm-up and the whole scenario and return the per-epoch record (no files
     written). `warm_up_s`: see `warm_up_s_for`."""
     sc = load(scenario, duration_s)
     warm = warm_up_s_for(sc, warm_up_s)
     start = wallclock.perf_counter()
     world = WarmUpWorld(sc, warm)
-    chain = Chain(world, sc, options)
+    chain = Chain(world, sc, options, correction_bound=correction_bound)
     for blk in world.epochs():
         chain.add_block(blk, on_epoch)
     log = chain.log()

@@ -24,6 +24,7 @@ from sqlalchemy import (
     Text,
     UniqueConstraint,
 )
+from sqlalchemy.sql.expression import false
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
 
@@ -77,6 +78,9 @@ class Mountpoint(Base):
     read_groups: Mapped[str] = mapped_column(String(256), default="")  # comma separated; "*" = public
     write_groups: Mapped[str] = mapped_column(String(256), default="")
     enabled: Mapped[bool] = mapped_column(Boolean, default=True)
+    # a VRS mountpoint's streams carry the centre's correction-error bound (RTCM 4001, decision 0280/0281):
+    # opt-in, off by default, so a stream without it is byte for byte what it was
+    correction_bound: Mapped[bool] = mapped_column(Boolean, default=False, server_default=false())
 
 
 class CasterUser(Base):

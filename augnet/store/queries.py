@@ -355,18 +355,20 @@ def get_mountpoint(session: Session, name: str) -> Mountpoint:
 
 
 def add_mountpoint(session: Session, actor: str, name: str, kind: str, format: str = "RTCM 3.3",
-                   read_groups: str = "", write_groups: str = "") -> Mountpoint:
+                   read_groups: str = "", write_groups: str = "", correction_bound: bool = False) -> Mountpoint:
     if session.scalar(select(Mountpoint).where(Mountpoint.name == name)) is not None:
         raise Conflict(f"mountpoint {name} exists")
-    mp = Mountpoint(name=name, kind=kind, format=format, read_groups=read_groups, write_groups=write_groups)
+    mp = Mountpoint(name=name, kind=kind, format=format, read_groups=read_groups, write_groups=write_groups,
+                    correction_bound=bool(correction_bound))
     session.add(mp)
-    audit(session, actor, "mountpoint.add", name, kind=kind, read_groups=read_groups, write_groups=write_groups)
+    audit(session, actor, "mountpoint.add", name, kind=kind, read_groups=read_groups, write_groups=write_groups,
+          correction_bound=bool(correction_bound))
     return mp
 
 
 def update_mountpoint(session: Session, actor: str, name: str, **changes) -> Mountpoint:
     mp = get_mountpoint(session, name)
-    allowed = {"kind", "format", "read_groups", "write_groups", "enabled"}
+    allowed = {"kind", "format", "read_groups", "write_groups", "enabled", "correction_bound"}
     unknown = set(changes) - allowed
     if unknown:
         raise ValueError(f"cannot change {sorted(unknown)} of a mountpoint")

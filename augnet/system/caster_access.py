@@ -73,6 +73,13 @@ def caster_tables(s: Session, described: dict[str, MountConfig]) -> tuple[dict[s
     return users, mounts
 
 
+def bound_mounts(s: Session) -> frozenset[str]:
+    """The enabled mountpoints whose VRS streams carry the correction-error bound (RTCM 4001, decision 0281):
+    the centre's business, not the caster core's, so kept out of `MountConfig`."""
+    return frozenset(s.scalars(select(Mountpoint.name).where(Mountpoint.correction_bound.is_(True),
+                                                              Mountpoint.enabled.is_(True))))
+
+
 @dataclass(frozen=True, slots=True)
 class AppliedChange:
     change: CasterChange | None  # None: a periodic reconcile
@@ -86,8 +93,12 @@ class CasterAccessSync:
 
     def __init__(self, caster: Caster, sessions: sessionmaker[Session], described: dict[str, MountConfig],
                  bus: Bus | None = None, reconcile_s: float = RECONCILE_S,
-                 clock: Callable[[], float] = time.monotonic):
+                 clock: Callable[[], float] = time.monotonic,
+                 on_bound_mounts: Callable[[frozenset[str]], None] | None = None):
         self.caster = caster
+        # told the store's correction-bound mountpoints at every apply (on the loop): the VRS stream factory
+        self.on_bound_mounts = on_bound_mounts
+        self.bound: frozenset[str] = frozenset()
         self.sessions = sessions
         self.described = dict(described)
         self.bus = bus
@@ -104,13 +115,16 @@ class CasterAccessSync:
 
     def read(self) -> tuple[dict[str, User], list[MountConfig]]:
         """The store's tables now (blocking: call it off the loop, or before the caster runs)."""
+        return self._read_all()[:2]
+
+    def _read_all(self) -> tuple[dict[str, User], list[MountConfig], frozenset[str]]:
         with self.sessions() as s:
-            return caster_tables(s, self.described)
+            return (*caster_tables(s, self.described), bound_mounts(s))
 
     async def refresh(self) -> bool:
         """Read the store and hand the caster its tables; False (logged, counted) when the read failed."""
         try:
-            users, mounts = await asyncio.get_running_loop().run_in_executor(self._reader, self.read)
+            users, mounts, bound = await asyncio.get_running_loop().run_in_executor(self._reader, self._read_all)
         except Exception:  # noqa: BLE001 - a store outage leaves the caster as it was, not down
             self.failures += 1
             log.exception("caster tables not read from the store")
@@ -118,6 +132,9 @@ class CasterAccessSync:
         try:
             self.caster.set_mounts(mounts)
             revoked = self.caster.set_users(users)
+            if self.on_bound_mounts is not None:
+                self.on_bound_mounts(bound)
+            self.bound = bound
         except Exception:  # noqa: BLE001 - a bad row or a bug must not end the sync task: logged, retried
             self.failures += 1
             log.exception("caster tables not applied")

@@ -33,6 +33,8 @@ Loop -> centre (the loop writes the messages of one loop iteration together, in 
     CloseSession
     StationMembership  a station joins (`xyz_m` given, not yet a member), moves (given, a member) or leaves
                     (None): the store's station table changed (`station_membership.py`)
+    SessionBound    whether a session's VRS carries the correction-error bound (RTCM 4001): its mountpoint's
+                    store field `correction_bound` (decision 0281); sent after OpenSession when on, and on a change
     VrsWritten      the last group of epoch t's VRS is written to the sockets: the centre may solve the network
     Stop            finish and exit (EOF on the socket does the same)
 Centre -> loop:
@@ -128,6 +130,12 @@ class StationMembership:
 
 
 @dataclass(frozen=True, slots=True)
+class SessionBound:
+    client_id: str
+    send: bool
+
+
+@dataclass(frozen=True, slots=True)
 class VrsWritten:
     t_gpst: float
 
@@ -175,10 +183,11 @@ class Alive:
     pass
 
 
-LoopMessage = StationData | OpenSession | MoveSession | CloseSession | StationMembership | VrsWritten | Stop
+LoopMessage = (StationData | OpenSession | MoveSession | CloseSession | StationMembership | SessionBound | VrsWritten
+               | Stop)
 CentreMessage = Ready | VrsGroup | EpochsSolved | CentreError | Alive
 Message = LoopMessage | CentreMessage
-FROM_LOOP = (StationData, OpenSession, MoveSession, CloseSession, StationMembership, VrsWritten, Stop)
+FROM_LOOP = (StationData, OpenSession, MoveSession, CloseSession, StationMembership, SessionBound, VrsWritten, Stop)
 FROM_CENTRE = (Ready, VrsGroup, EpochsSolved, CentreError, Alive)
 
 
@@ -482,6 +491,7 @@ LAYOUTS: dict[int, _Record] = {
     5: _Record(VrsWritten, (("t_gpst", F64),)),
     6: _Record(Stop, ()),
     7: _Record(StationMembership, (("station", STR), ("xyz_m", _Optional(_Tuple(F64, 3))))),
+    8: _Record(SessionBound, (("client_id", STR), ("send", BOOL))),
     16: _Record(Ready, (("pid", I64),)),
     17: _Record(VrsGroup, (("t_gpst", F64), ("client_ids", SEPARATED_STRS), ("rtcm", PACKED_BYTES),
                            ("ready_unix_s", F64), ("arrival", _Optional(_Tuple(F64, 2))),
@@ -632,6 +642,6 @@ class Decoder:
 
 __all__ = [
     "MAGIC", "PROTOCOL_VERSION", "MAX_BODY_BYTES", "HEADER_BYTES", "LAYOUTS", "ProtocolError", "encode", "Decoder",
-    "StationData", "OpenSession", "MoveSession", "CloseSession", "VrsWritten", "Stop", "Ready", "VrsGroup",
+    "StationData", "OpenSession", "MoveSession", "CloseSession", "SessionBound", "VrsWritten", "Stop", "Ready", "VrsGroup",
     "EpochsSolved", "CentreError", "Alive", "LoopMessage", "CentreMessage", "Message", "FROM_LOOP", "FROM_CENTRE",
 ]

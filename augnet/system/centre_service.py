@@ -50,7 +50,8 @@ from augnet.centre.vrs_admission import AdmissionConfig
 from augnet.gnss import time as gtime
 from augnet.system.centre_protocol import (
     FROM_CENTRE, FROM_LOOP, Alive, CentreError, CloseSession, Decoder, EpochsSolved, Message, MoveSession,
-    OpenSession, ProtocolError, Ready, StationData, StationMembership, Stop, VrsGroup, VrsWritten, encode)
+    OpenSession, ProtocolError, Ready, SessionBound, StationData, StationMembership, Stop, VrsGroup, VrsWritten,
+    encode)
 from augnet.centre.network import station_position_problem
 from augwire.errors import StreamRefused
 
@@ -104,6 +105,9 @@ class CentreSpec:
     network_name: str = "line"
     area: AreaConfig | None = None  # the service area (default: from the stations, service_area.py)
     admission: AdmissionConfig | None = None  # when satellites enter each VRS (default: on, vrs_admission.py)
+    # the centre estimates its correction-error bound (decision 0280); a session's VRS carries it (RTCM 4001)
+    # only when its mountpoint opted in (`CentreService.set_bound_mounts`, decision 0281)
+    estimate_correction_bound: bool = True
 
 
 class _Handle:
@@ -180,6 +184,8 @@ class CentreService:
         self.pid: int | None = None
         self._sinks: dict[str, Callable[[bytes], None]] = {}  # loop-side sinks of live sessions
         self._positions: dict[str, tuple[float, float, float]] = {}  # to re-open them in a new child
+        self._mounts: dict[str, str] = {}  # live session -> the mountpoint it reads
+        self.bound_mounts: frozenset[str] = frozenset()  # mountpoints whose VRS carry the 4001 bound
         self._pending: list[Message] = []
         self._flush_scheduled = False
         self._proc = None
@@ -221,8 +227,23 @@ class CentreService:
         self._check_area(client_id, fix.lat_deg, fix.lon_deg, fix.height_m, sink)
         self._sinks[client_id] = sink
         self._positions[client_id] = (fix.lat_deg, fix.lon_deg, fix.height_m)
+        self._mounts[client_id] = mount
         self._send(OpenSession(client_id, fix.lat_deg, fix.lon_deg, fix.height_m))
+        if mount in self.bound_mounts:
+            self._send(SessionBound(client_id, True))
         return _Handle(self, client_id)
+
+    def set_bound_mounts(self, names) -> None:
+        """The mountpoints whose sessions' VRS carry the correction-error bound (the store's table, decision
+        0281): a live session of a mountpoint that changed is told from its next epoch, no restart."""
+        new = frozenset(names)
+        changed = new ^ self.bound_mounts
+        self.bound_mounts = new
+        if changed:
+            log.info("correction bound (RTCM 4001) on mountpoints: %s", ", ".join(sorted(new)) or "none")
+        for cid, mount in self._mounts.items():
+            if mount in changed:
+                self._send(SessionBound(cid, mount in new))
 
     def _move(self, client_id: str, lat: float, lon: float, h: float) -> None:
         if client_id in self._sinks:
@@ -252,6 +273,7 @@ class CentreService:
     def _close(self, client_id: str) -> None:
         if self._sinks.pop(client_id, None) is not None:
             self._positions.pop(client_id, None)
+            self._mounts.pop(client_id, None)
             self._send(CloseSession(client_id))
 
     def set_station_enabled(self, station: str, enabled: bool) -> None:
@@ -365,6 +387,7 @@ class CentreService:
         self._channel = channel
         # sessions the caster already has (after a restart) first, then whatever queued meanwhile
         reopen = [OpenSession(cid, *pos) for cid, pos in self._positions.items()]
+        reopen += [SessionBound(cid, True) for cid in self._positions if self._mounts.get(cid) in self.bound_mounts]
         pending = [c for c in self._pending if not isinstance(c, OpenSession)] if reopen else self._pending
         self._pending = reopen + pending
         self._flush()
@@ -587,7 +610,7 @@ class _CentreWorker:
         sock.setblocking(True)
         stations = {k: np.asarray(v, float) for k, v in spec.stations.items()}
         self.engine = CentreEngine(stations, spec.t_ref_gpst, network_name=spec.network_name, area=spec.area,
-                                   admission=spec.admission)
+                                   admission=spec.admission, estimate_correction_bound=spec.estimate_correction_bound)
         self.engine.after_serve = self._flush_vrs  # VRS leave as soon as they exist, before the network solve
         self.engine.serve_group = VRS_GROUP
         gc.freeze()  # the engine's long-lived start-up objects: not scanned by every full collection
@@ -687,6 +710,8 @@ class _CentreWorker:
                 eng.move_session(cmd.client_id, cmd.lat_deg, cmd.lon_deg, cmd.h_m)
             elif isinstance(cmd, CloseSession):
                 eng.close_session(cmd.client_id)
+            elif isinstance(cmd, SessionBound):
+                eng.set_session_bound(cmd.client_id, cmd.send)
             elif isinstance(cmd, StationMembership):
                 if cmd.xyz_m is None:
                     eng.remove_station(cmd.station)

@@ -30,6 +30,8 @@ import signal
 import time
 from dataclasses import replace
 
+import numpy as np
+
 from augnet.centre.engine import SUBJECT_ALARMS, EpochReport
 from augnet.gnss import time as gtime
 from augnet.onboard.trackmap import TrackDatabase
@@ -86,6 +88,7 @@ class System:
         self.admin_password: str | None = None  # into the state file, never to stdout
         self.admin_password_created = False
         self.trains: dict[str, OnboardTrain] = {}
+        self.atp: dict = {}  # train id -> AtpConnection: its RSSP-I link and ATP simulator
         self.train_watch = TrainCorrectionWatch()  # a train's stale corrections are an operator's alarm
         self.train_sessions: dict[str, int] = {}
         self.sections = None  # SectionService: the trains per line section, from their position reports
@@ -116,7 +119,7 @@ class System:
         await self._start_rbc(stations)
         await self._start_sections(sc)
         await self._start_console(records)
-        self._start_trains(sc, train_rx, port)
+        await self._start_trains(sc, train_rx, port)
         self._start_stations(sc, port)  # last: they feed everything above
         self._write_state(port)
         # what start-up built (the simulated world, the console, modules) lives as long as the run: out of
@@ -179,15 +182,17 @@ class System:
         records) and the centre as its VRS stream factory, each registered station's stream tapped into the
         centre; returns its port. Its tables follow the store from then on (`caster_access.py`), and the
         network's stations the registry (`station_membership.py`)."""
-        from augnet.system.caster_access import CasterAccessSync, caster_tables
+        from augnet.system.caster_access import CasterAccessSync, bound_mounts, caster_tables
         from augnet.system.station_membership import StationSync
 
         described = {m.name: m for m in seed.mounts}
-        fut = self.writer.submit(lambda db: caster_tables(db, described))
-        users, mounts = await asyncio.wrap_future(fut) or ({}, [])
+        fut = self.writer.submit(lambda db: (*caster_tables(db, described), bound_mounts(db)))
+        users, mounts, bound = await asyncio.wrap_future(fut) or ({}, [], frozenset())
+        self.centre.set_bound_mounts(bound)  # the 4001 opt-in per mountpoint (decision 0281), then live
         self.caster = Caster(replace(seed, users=users, mounts=tuple(mounts)), {VRS_MOUNT: self.centre})
         self.caster.on_alarm = self._alarm  # a bad-password flood is an operator's alarm (issue 19)
-        self.caster_access = CasterAccessSync(self.caster, self.sessions, described)
+        self.caster_access = CasterAccessSync(self.caster, self.sessions, described,
+                                              on_bound_mounts=self.centre.set_bound_mounts)
         port = await self.caster.start()
         self.station_sync = StationSync(self.centre, self.caster, self.sessions, on_applied=self._on_membership)
         self.station_sync.adopt(records)
@@ -303,16 +308,26 @@ class System:
         self.admin_name, self.admin_password, self.admin_password_created = boot.name, boot.password, boot.created
         return boot.token
 
-    def _start_trains(self, sc: Scenario, train_rx, port: int) -> None:
+    async def _start_trains(self, sc: Scenario, train_rx, port: int) -> None:
         """One onboard train per simulated train receiver: its raw stream tapped from the caster, its VRS
-        over NTRIP, a train session in the store."""
+        over NTRIP, a train session in the store, and (on a line with balises) its RSSP-I link to an ATP
+        simulator that receives its timer-based virtual balise telegrams (`atp_link.py`)."""
+        from augnet.system.atp_link import AtpConnection, balise_groups
+
         world = self.world
         db_dict = track_database(sc, world.track) if world.track is not None else None
         track_db = TrackDatabase.from_dict(db_dict) if db_dict else None
-        for rx in train_rx:
+        groups = balise_groups(track_db) if track_db is not None else []
+        for number, rx in enumerate(train_rx, start=1):
+            atp = None
+            if groups:
+                atp = AtpConnection(number, groups)
+                await atp.start(self.settings.host)
+                self.atp[rx.id] = atp
             tr = OnboardTrain(rx.id, lambda: world.nav, track_db, LOCALHOST, port, VRS_MOUNT,
                               user=TRAIN_USER, password=self.credentials["train_password"],
-                              on_output=self._on_train_output, hold=self.centre.delivering)
+                              on_output=self._on_train_output, hold=self.centre.delivering,
+                              balise_groups=groups, timer_sink=atp.sink if atp is not None else None)
             try:
                 self.caster.tap(mountpoint_of("train", rx.id), tr.on_rover_bytes)
             except ValueError:  # not in the store: the train runs without its raw stream
@@ -407,6 +422,16 @@ class System:
         for event in self.train_watch.check(train.id, newest, gtime.now_gpst()):
             self._alarm(*event)
 
+    def _truth_chainage_m(self, train_id: str, t_gpst: float) -> float | None:
+        """The simulator's true chainage [m] of a train at `t_gpst`: for the run report's passage errors only
+        (truth kept apart: the onboard never reads it)."""
+        from stations.kinematics import train_motion
+
+        cfg = next((t for t in self.world.scenario.trains if t.id == train_id), None)
+        if cfg is None or self.world.track is None:
+            return None
+        return float(train_motion(cfg, self.world.track.length_m, np.array([t_gpst - self.world.t0])).s_m[0])
+
     def _on_station_change(self, code: str, fields: dict) -> None:
         """An operator changed the station registry in this process's console (called on its thread pool):
         the network follows it at once rather than at the next reconcile."""
@@ -476,9 +501,13 @@ class System:
             self.writer.close()
 
     async def _stop_trains(self) -> None:
-        """Each train stops; its store session is closed with the bytes it received and its fix rate."""
+        """Each train stops (then its ATP link); its store session is closed with the bytes it received and
+        its fix rate."""
         for tr in self.trains.values():
             await tr.stop()
+            atp = self.atp.get(tr.id)
+            if atp is not None:
+                await atp.stop()
             sid = self.train_sessions.get(tr.id)
             if sid is not None and self.writer is not None:
                 n = max(1, tr.stats.epochs)
@@ -490,6 +519,7 @@ class System:
         """The run report as of now (`run_report.py`)."""
         rep = run_report(
             self.settings.scenario, self.started, time.time(), centre=self.centre, trains=self.trains,
+            atp={k: v.snapshot() for k, v in self.atp.items()}, truth_chainage_m=self._truth_chainage_m,
             alarms=self.alarms.log if self.alarms is not None else [],
             rbc_snapshot=self.rbc.snapshot() if self.rbc else None,
             caster_snapshot=self.caster.snapshot(clients=False) if self.caster is not None else None,

@@ -34,6 +34,7 @@ from augnet.gnss import time as gtime
 from augnet.gnss.ephemeris import NavigationData
 from augnet.gnss.geometry import ecef_to_geodetic, enu_rotation
 from augnet.onboard.balise import ListSink
+from augnet.onboard.balise_timer import MAX_ESTIMATE_AGE_S, TimedBaliseDetector, TimerSink
 from augnet.onboard.corrections import CorrectionDecoder
 from augnet.onboard.ntrip_client import NtripClient
 from augnet.onboard.observations import EpochObs
@@ -44,6 +45,10 @@ from augnet.onboard.unit import OnboardUnit, UnitOutput
 MAX_BASE_WAIT_S = 1.5  # a rover epoch waits this long for its own VRS epoch before using the latest
 MAX_QUEUED_ROVER_EPOCHS = 10
 GGA_INTERVAL_S = 2.0  # the caster re-evaluates a VRS point at most every 10 s (reposition policy)
+# The balise timer's oldest usable estimate [s]: its own 2 s (one missed 1 Hz epoch) plus the wait of a rover
+# epoch for its VRS here, since the estimate of epoch t exists only once t is processed
+TIMER_ESTIMATE_AGE_S = MAX_ESTIMATE_AGE_S + MAX_BASE_WAIT_S
+MAX_SPEED_BASE_S = 2.0  # two matched fixes this close give the timer its speed (a 1 Hz epoch missed at most)
 
 
 @dataclass
@@ -56,13 +61,19 @@ class TrainStats:
     base_moves: int = 0
     correction_latency_s: collections.deque = field(default_factory=lambda: collections.deque(maxlen=3600))
     balises: list = field(default_factory=list)
+    timer_updates: int = 0  # fused estimates given to the balise timer
+    # the map match's protection levels and, in them, the centre's 4001 bound on each axis [m] (inf: unbounded)
+    along_pl_m: collections.deque = field(default_factory=lambda: collections.deque(maxlen=3600))
+    cross_pl_m: collections.deque = field(default_factory=lambda: collections.deque(maxlen=3600))
+    correction_along_m: collections.deque = field(default_factory=lambda: collections.deque(maxlen=3600))
     errors: int = 0
 
 
 class OnboardTrain:
     def __init__(self, train_id: str, nav_source, track_db: TrackDatabase | None, host: str, port: int,
                  vrs_mount: str, *, user: str = "", password: str = "", on_output=None,
-                 integrity_risk: float = DEFAULT_INTEGRITY_RISK, hold: Callable[[], bool] | None = None):
+                 integrity_risk: float = DEFAULT_INTEGRITY_RISK, hold: Callable[[], bool] | None = None,
+                 balise_groups: list | None = None, timer_sink: TimerSink | None = None):
         self.id = train_id
         self.hold = hold  # () -> True while the caster writes an epoch's VRS: processing waits for `resume`
         self.nav_source = nav_source  # () -> NavigationData: the broadcast ephemerides the receiver decoded
@@ -80,6 +91,12 @@ class OnboardTrain:
         self.stats = TrainStats()
         self.on_output = on_output
         self.k_h = gaussian_k(integrity_risk)
+        # timer-based virtual balises (balise_timer.py): passages at their predicted moment, to `timer_sink`
+        # (the RSSP-I link to the train's ATP in `augnet up`, atp_link.py)
+        self.timer = (TimedBaliseDetector(balise_groups, timer_sink, k=self.k_h, max_estimate_age_s=TIMER_ESTIMATE_AGE_S)
+                      if balise_groups and timer_sink is not None else None)
+        self._last_fix_along: tuple[float, str, float] | None = None  # (epoch, track, chainage [m])
+        self._timer_handle: asyncio.TimerHandle | None = None
         self._t_first: float | None = None
         self.client = NtripClient(host, port, vrs_mount, self._on_vrs, user=user, password=password,
                                   gga_provider=self._gga, gga_interval_s=GGA_INTERVAL_S)
@@ -118,11 +135,16 @@ class OnboardTrain:
             return
         while self.rover_queue:
             ep, arrived = self.rover_queue[0]
-            if round(ep.time, 3) in self.bases or now - arrived >= MAX_BASE_WAIT_S:
+            if self._base_ready(ep.time) or now - arrived >= MAX_BASE_WAIT_S:
                 self.rover_queue.popleft()
                 self._process(ep, arrived)
             else:
                 break
+
+    def _base_ready(self, t: float) -> bool:
+        """Epoch t's VRS is here, and its 4001 bound too when the stream carries them (it follows the MSM;
+        a TCP read may split them, and without it the epoch's PLs would be infinite)."""
+        return round(t, 3) in self.bases and (not self.base_dec.bounds.receiving or self.base_dec.bounds.has_epoch(t))
 
     async def tick(self) -> None:
         """Release rover epochs whose VRS never came (centre down, no session yet)."""
@@ -165,7 +187,7 @@ class OnboardTrain:
         try:
             self._update_base(unit)
             base = self.bases.get(round(rover.time, 3), self.last_base if self.base_position is not None else None)
-            out = unit.step(rover, base)
+            out = unit.step(rover, base, self.base_dec.bounds)  # the 4001 bounds, when its mountpoint sends them
         except Exception:  # noqa: BLE001 - the processing loop never dies on data
             self.stats.errors += 1
             return
@@ -177,8 +199,51 @@ class OnboardTrain:
         if out.solution.status == Status.FIX and self.stats.first_fix_s is None:
             self.stats.first_fix_s = rover.time - self._t_first
         self.stats.balises.extend(out.balises)
+        if out.match is not None and out.match.track:
+            self.stats.along_pl_m.append(out.match.along_pl_m)
+            self.stats.cross_pl_m.append(out.match.cross_pl_m)
+            self.stats.correction_along_m.append(out.match.correction_along_m)
+        if self.timer is not None:
+            self._feed_timer(out)
         if self.on_output is not None:
             self.on_output(self, out)
+
+    # --- the balise timer (its clock: GPST, as the rover's epochs) ---------------------------------------
+
+    def _feed_timer(self, out: UnitOutput) -> None:
+        """This epoch's map-matched fix (chainage, PL) and the speed from the last one into the timer; then
+        the timer acts on whatever is due by now and is set for its next moment."""
+        m, t = out.match, out.solution.time
+        if m is not None and m.track and math.isfinite(m.along_pl_m) and out.solution.status != Status.NONE:
+            along = m.km * 1000.0
+            prev = self._last_fix_along
+            self._last_fix_along = (t, m.track, along)
+            sigma = m.along_pl_m / self.k_h
+            if prev is not None and prev[1] == m.track and 0.0 < t - prev[0] <= MAX_SPEED_BASE_S:
+                dt = t - prev[0]
+                # speed from two fixes, variance of their difference (as the scenario runner's timer)
+                self.timer.update(t, m.track, along, (along - prev[2]) / dt, sigma ** 2, 2.0 * sigma ** 2 / dt ** 2)
+                self.stats.timer_updates += 1
+        self._tick_timer()
+
+    def _tick_timer(self) -> None:
+        if self.timer is None:
+            return
+        if self._timer_handle is not None:  # one pending moment at a time: the newest estimate's
+            self._timer_handle.cancel()
+            self._timer_handle = None
+        now = gtime.now_gpst()
+        try:
+            self.timer.tick(now)
+        except Exception:  # noqa: BLE001 - the train carries on; counted
+            self.stats.errors += 1
+        due = [d for d in self.timer.due_times() if d > now]
+        if due:
+            try:
+                loop = asyncio.get_running_loop()
+            except RuntimeError:  # not on a loop (a test stepping the train): the next epoch ticks it
+                return
+            self._timer_handle = loop.call_later(min(due) - now, self._tick_timer)
 
     def _gga(self) -> str | None:
         return self.last.gga if self.last is not None and self.last.gga else None
@@ -215,6 +280,9 @@ class OnboardTrain:
         self._ticker = asyncio.ensure_future(self.tick())
 
     async def stop(self) -> None:
+        if self._timer_handle is not None:
+            self._timer_handle.cancel()
+            self._timer_handle = None
         self.client.stop()
         tasks = [t for t in (self._client_task, self._ticker) if t is not None]
         for t in tasks:

@@ -147,3 +147,26 @@ def test_no_bound_before_the_window_has_filled_and_references_carry_no_sample():
         assert np.isnan(b).all() == (i + 1 < 10)
     assert np.isnan(cb.samples(["G01"])).all()
     assert np.all(b[0, 1:] > 0) and b[0, 0] > 0  # the ex-reference takes the pooled bound, never zero
+
+
+def test_a_train_between_the_end_stations_takes_the_interpolated_stations_samples():
+    """Decision 0281: an end station held out is extrapolated; a train between the ends is interpolated and
+    takes the bracketed stations' overbound, one beyond the ends the whole window's."""
+    from augnet.centre.correction_bound import bracketed_points, bracketed_stations
+
+    line = np.array([[0.0, 0.0], [60e3, 2e3], [120e3, -1e3], [180e3, 1e3], [240e3, 0.0]])
+    assert bracketed_stations(line).tolist() == [False, True, True, True, False]
+    assert bracketed_points(line, np.array([[100e3, 5e3], [-10e3, 0.0], [250e3, 0.0]])).tolist() == [True, False, False]
+    rng = np.random.default_rng(7)
+    sats = [f"G{i:02d}" for i in range(1, 9)]
+    curv = rng.uniform(1e-12, 3e-12, len(sats))  # a curved field: extrapolation errs far more than interpolation
+    cb = CorrectionBound()
+    for _ in range(40):
+        x = line[:, :1]
+        v = curv * (x - 0.0) * (x - 240e3) + rng.normal(0, 0.003, (len(line), len(sats)))
+        v -= v[0]
+        cb.update(line, v, sats, 0, 2.0)
+    inside = cb.sigma(line, np.array([[90e3, 0.0]]), sats, 2.0)
+    assert np.all(cb.interpolated_sigma(sats) < cb.normalised_sigma(sats))
+    beyond = cb.sigma(line, np.array([[-30e3, 0.0]]), sats, 2.0)  # 30 km from the end station as well
+    assert np.all(inside < beyond) and np.all(np.isfinite(inside))

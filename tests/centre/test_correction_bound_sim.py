@@ -107,3 +107,31 @@ def test_bad_input_is_refused():
         cb.update(STATIONS, np.zeros((len(STATIONS), NSAT)), SATS, master=9)
     with pytest.raises(CorrectionBoundError):
         cb.update(STATIONS, np.zeros((len(STATIONS), NSAT)), SATS, ionosphere_level_ppm=float("nan"))
+
+
+def test_satellites_sent_uncorrected_near_the_master_are_bounded_by_the_fields_gradient():
+    """Decision 0281: within 5 km of its master a VRS sends the master's own observations for some satellites;
+    their error is the whole field difference to the master, bounded from the stations' residual per metre."""
+    from augnet.centre.correction_bound import K_CORRECTION_BOUND
+
+    rng = np.random.default_rng(11)
+    f = _field(rng)
+    cb = CorrectionBound()
+    errs, bounds = [], []
+    for t in range(200):
+        truth = f(STATIONS, t) - f(STATIONS[:1], t)
+        v = truth + rng.normal(size=truth.shape) * NOISE_M
+        v[0] = 0.0
+        cb.update(STATIONS, v, SATS, ionosphere_level_ppm=2.0)
+        if t < WARM_UP_EPOCHS:
+            continue
+        r = rng.uniform(0, MIN_GEOMETRY_DISTANCE_M, 40)
+        a = rng.uniform(0, 2 * np.pi, 40)
+        pts = STATIONS[0] + np.column_stack([r * np.cos(a), r * np.sin(a)])
+        errs.append(np.abs(f(pts, t) - f(STATIONS[:1], t)))  # the master's own value used: error = the difference
+        bounds.append(K_CORRECTION_BOUND * cb.uncorrected_sigma(r, SATS, 2.0))
+    err, bound = np.array(errs), np.array(bounds)
+    assert np.all(np.isfinite(bound))
+    assert np.mean(err <= bound) >= 0.999
+    assert np.max(_looseness(err, bound)) < 10.0
+    assert np.all(np.isnan(CorrectionBound().uncorrected_sigma([1e3], SATS, 2.0)))  # no window yet: no bound

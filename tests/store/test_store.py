@@ -129,3 +129,28 @@ def test_bad_url_names_what_is_expected():
 
     with pytest.raises(StoreError, match="expected sqlite"):
         make_engine("mysql://x")
+
+
+def test_a_mountpoints_correction_bound_is_off_by_default_and_its_change_audited(store):
+    with store.begin() as s:
+        q.add_mountpoint(s, "alice", "VRS", "vrs", read_groups="trains")
+        q.add_mountpoint(s, "alice", "VRS4001", "vrs", correction_bound=True)
+    with store.begin() as s:
+        q.update_mountpoint(s, "bob", "VRS", correction_bound=True)
+    with store() as s:
+        assert [(m.name, m.correction_bound) for m in q.list_mountpoints(s)] == [("VRS", True), ("VRS4001", True)]
+        log = q.audit_log(s)
+        assert (log[0].actor, log[0].action, log[0].detail) == (
+            "bob", "mountpoint.edit", {"before": {"correction_bound": False}, "after": {"correction_bound": True}})
+        assert log[-1].detail["correction_bound"] is False and log[-2].detail["correction_bound"] is True
+
+
+def test_the_correction_bound_migration_keeps_existing_mountpoints_off(tmp_path):
+    engine = make_engine(f"sqlite:///{tmp_path / 'old.sqlite'}")
+    migrate(engine, "0002")
+    with engine.begin() as c:
+        c.execute(sa.text("insert into mountpoints (name, kind, format, read_groups, write_groups, enabled) "
+                          "values ('VRS', 'vrs', 'RTCM 3.3', 'trains', '', 1)"))
+    migrate(engine)
+    with engine.connect() as c:
+        assert c.execute(sa.text("select correction_bound from mountpoints")).scalar() in (0, False)

@@ -23,7 +23,7 @@ from augnet.system import centre_protocol as cp
 from augnet.system.centre_protocol import (
     FROM_CENTRE, FROM_LOOP, HEADER_BYTES, LAYOUTS, MAGIC, MAX_BODY_BYTES, PROTOCOL_VERSION, Alive, CentreError,
     CloseSession, Decoder, EpochsSolved, MoveSession, OpenSession, ProtocolError, Ready, StationData,
-    StationMembership, Stop, VrsGroup, VrsWritten, encode)
+    SessionBound, StationMembership, Stop, VrsGroup, VrsWritten, encode)
 from tests.system.test_centre_service import _until
 
 T = 1457143239.0
@@ -85,6 +85,8 @@ def one_of_each() -> list:
         CloseSession("VRS/1"),
         StationMembership("STA5", (4.8e6, 1.8e5, 4.2e6)),
         StationMembership("STA5", None),
+        SessionBound("VRS/1", True),
+        SessionBound("VRS/1", False),
         VrsWritten(T),
         Stop(),
         Ready(4242),

@@ -25,6 +25,9 @@ def _trains():
                        first_fix_s=31.0, vrs_epochs=220, base_resets=1, base_moves=3,
                        balises=[NS(balise_id="B1"), NS(balise_id="B2")], errors=0)
     fixed.correction_latency_s.extend([0.1, 0.2, 0.3, 0.25, float("nan")])
+    fixed.along_pl_m.extend([0.04, 0.05, 0.06, float("inf")])
+    fixed.cross_pl_m.extend([0.05, 0.06, 0.07, float("inf")])
+    fixed.correction_along_m.extend([0.0, 0.0, 0.0, float("inf")])
     return {"G101": NS(id="G101", stats=fixed, last=NS(solution=NS(status=1))),
             "G303": NS(id="G303", stats=TrainStats(), last=None)}
 
@@ -47,10 +50,12 @@ EXPECTED = {
         "G101": {"epochs": 230, "status_counts": {"fix": 200, "float": 25, "single": 5}, "fix_rate": 0.8696,
                  "time_to_first_fix_s": 31.0, "vrs_epochs": 220, "correction_latency_p50_s": 0.225,
                  "correction_latency_p99_s": 0.298, "base_moves": 3, "base_resets": 1, "balises": ["B1", "B2"],
-                 "errors": 0, "holds_fix": True},
+                 "errors": 0, "holds_fix": True, "along_pl_p50_m": 0.05, "cross_pl_p50_m": 0.06,
+                 "correction_along_p50_m": 0.0, "unbounded_epochs": 1},
         "G303": {"epochs": 0, "status_counts": {}, "fix_rate": 0.0, "time_to_first_fix_s": None, "vrs_epochs": 0,
                  "correction_latency_p50_s": None, "correction_latency_p99_s": None, "base_moves": 0,
-                 "base_resets": 0, "balises": [], "errors": 0, "holds_fix": False},
+                 "base_resets": 0, "balises": [], "errors": 0, "holds_fix": False, "along_pl_p50_m": None,
+                 "cross_pl_p50_m": None, "correction_along_p50_m": None, "unbounded_epochs": 0},
     },
     "alarms": ALARMS, "rbc": RBC,
     "caster": {"port": 2101, "counters": {"requests": 10, "rejected": 1},
@@ -75,3 +80,21 @@ def test_a_run_that_never_started_its_parts_reports_empty_sections():
                       "stations": [], "network_epochs": 0, "centre_solve_ms_p99": None, "centre_latency": {},
                       "centre_stages_ms": {}, "centre_errors": 0, "centre_restarts": 0, "trains": {}, "alarms": [],
                       "rbc": {}, "caster": {}, "store": {}, "sections": {}}
+
+
+def test_the_timers_passages_are_reported_with_their_error_against_the_truth():
+    from augnet.onboard.balise_timer import BaliseGroup, Miss, Passage
+    from augnet.system.run_report import timed_balise_entry
+
+    g1, g2 = BaliseGroup("VB-1", "L1-2", 156000.0), BaliseGroup("VB-2", "L1-2", 151000.0)
+    sink = NS(passages=[Passage(g1, 100.0, 100.004, -1, 83.3, 0.058)], misses=[Miss(g2, 160.2, "estimate too old")],
+              brakes=[(161.0, "2 consecutive linked groups missed")])
+    # the truth: 4 cm short of the group at the predicted moment, travelling towards decreasing chainage
+    entry = timed_balise_entry(sink, "G303", lambda tid, t: 156000.04 if (tid, t) == ("G303", 100.0) else None)
+    assert entry == {
+        "passages": [{"group": "VB-1", "time_gpst": 100.0, "emitted_at_gpst": 100.004, "confidence_m": 0.058,
+                      "speed_mps": 83.3, "error_m": -0.04}],
+        "misses": [{"group": "VB-2", "time_gpst": 160.2, "reason": "estimate too old"}],
+        "service_brake_requests": [{"time_gpst": 161.0, "reason": "2 consecutive linked groups missed"}],
+        "max_abs_error_m": 0.04}
+    assert timed_balise_entry(sink, "G303")["passages"][0]["error_m"] is None  # no truth given: none claimed

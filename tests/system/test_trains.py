@@ -33,3 +33,27 @@ def test_a_train_holds_its_epochs_while_the_caster_delivers_and_then_processes_t
     free.bases[round(now, 3)] = _Epoch(now)
     free._drain(now)
     assert done[-1] == ("T2", now)
+
+
+def test_while_bounds_come_a_rover_epoch_waits_for_its_vrs_epochs_4001_too():
+    import numpy as np
+
+    from augnet.gnss.rtcm.correction_bound import CorrectionBoundMessage
+    from augnet.onboard.correction_bound import epoch_key
+
+    tr = OnboardTrain("T3", lambda: None, None, "127.0.0.1", 1, "VRS")
+    done = []
+    tr._process = lambda ep, arrived: done.append(ep.time)
+    now = 1_479_350_010.0
+    tr.base_dec.bounds.add(CorrectionBoundMessage(1, epoch_key(now - 1.0), 1, ["G01"], np.array([0.01])))
+    tr.rover_queue.append((_Epoch(now), now))
+    tr.bases[round(now, 3)] = _Epoch(now)  # the VRS epoch came, its 4001 (after the MSM) not yet
+    tr._drain(now + 0.1)
+    assert done == []
+    tr.base_dec.bounds.add(CorrectionBoundMessage(1, epoch_key(now), 1, ["G01"], np.array([0.01])))
+    tr._drain(now + 0.2)
+    assert done == [now]
+    tr.rover_queue.append((_Epoch(now + 1.0), now + 1.0))  # a 4001 that never comes: MAX_BASE_WAIT_S, then on
+    tr.bases[round(now + 1.0, 3)] = _Epoch(now + 1.0)
+    tr._drain(now + 1.0 + MAX_BASE_WAIT_S)
+    assert done == [now, now + 1.0]

@@ -271,6 +271,27 @@ def test_both_trains_hold_a_fix_and_the_run_is_reported(up_run):
     assert report["store"]["failures"] == 0
 
 
+def test_the_atp_simulators_receive_the_timer_passages_in_order(up_run):
+    """Issue 15: in `augnet up` the timer-based virtual balise passages reach each train's ATP simulator over
+    RSSP-I, in order and acknowledged, and report.json lists them with their error against the truth."""
+    report = _finished(up_run)
+    total = 0
+    for tid, tr in report["trains"].items():
+        timed, atp = tr["timed_balises"], tr["atp"]
+        sent = timed["passages"]
+        got = atp["telegrams_received"]
+        assert [t["group"] for t in got] == [p["group"] for p in sent], (tid, timed, atp)
+        assert [t["time_ms"] for t in got] == [round(p["time_gpst"] * 1000) for p in sent]
+        chain = [t["chainage_mm"] for t in got]
+        assert chain == sorted(chain, reverse=tid == "G303")  # G303 runs towards decreasing km
+        assert atp["link_up"] and atp["unacknowledged"] == 0 and atp["atp_alarms"] == []
+        for p in sent:
+            assert p["error_m"] is not None and abs(p["error_m"]) <= 0.5, (tid, p)  # issue 15 must-show
+            assert p["emitted_at_gpst"] >= p["time_gpst"]  # never before the predicted moment
+        total += len(sent)
+    assert total >= 3
+
+
 def test_the_store_holds_the_run(up_run):
     _finished(up_run)
     db = sqlite3.connect(up_run["work"] / "augnet.db")

@@ -78,10 +78,11 @@ def _mount_out(mp: Mountpoint | None, name: str, stats: dict | None) -> Mountpoi
     if mp is None:
         stats = json_safe(stats)
         return MountpointOut(name=name, kind=(stats or {}).get("kind", "source"), format=None, read_groups=None,
-                             write_groups=None, enabled=True, in_store=False, stats=stats)
+                             write_groups=None, enabled=True, correction_bound=None, in_store=False, stats=stats)
     stats = json_safe(stats)
     return MountpointOut(name=mp.name, kind=mp.kind, format=mp.format, read_groups=mp.read_groups,
-                         write_groups=mp.write_groups, enabled=mp.enabled, in_store=True, stats=stats)
+                         write_groups=mp.write_groups, enabled=mp.enabled,
+                         correction_bound=bool(mp.correction_bound), in_store=True, stats=stats)
 
 
 def _read(sessions, query, *args, **kwargs):
@@ -118,7 +119,8 @@ async def mountpoints(who: Viewer, live: Live, request: Request) -> list[Mountpo
 async def add_mountpoint(body: MountpointIn, who: Admin, live: Live, request: Request) -> MountpointOut:
     _check_format(body.format)
     mp = await run_in_threadpool(_write, request.app.state.sessions, q.add_mountpoint, who.name, body.name,
-                                 body.kind, body.format, body.read_groups, body.write_groups)
+                                 body.kind, body.format, body.read_groups, body.write_groups,
+                                 body.correction_bound)
     _tell_system(live, "mountpoint", mp.name, {"action": "add", **body.model_dump()})
     await _announce(request, "mountpoint", mp.name, "add")
     return _mount_out(mp, mp.name, None)
