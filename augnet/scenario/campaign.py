@@ -164,13 +164,16 @@ def withdrawals(available: np.ndarray) -> np.ndarray:
     return np.concatenate([[False], a[:-1] & ~a[1:]])
 
 
-def method_figures(err: np.ndarray, pl: np.ndarray, available: np.ndarray, alarm: np.ndarray) -> dict:
-    """Availability over every epoch, HMI (error > PL while available), alarms, error and PL percentiles."""
+def method_figures(err: np.ndarray, pl: np.ndarray, available: np.ndarray, alarm: np.ndarray,
+                   alert_limit_m: float = ALONG_TRACK_ALERT_LIMIT_M) -> dict:
+    """Availability over every epoch, HMI (error > PL while available: the issue's definition), of those the
+    ones beyond the alert limit too (the Stanford plot's HMI region), alarms, error and PL percentiles."""
     n = len(err)
     hmi = available & (err > pl)
     return {"epochs": int(n), "available": int(available.sum()),
             "availability": float(available.mean()) if n else None,
-            "hmi": int(hmi.sum()), "alarms": int(np.asarray(alarm, bool).sum()),
+            "hmi": int(hmi.sum()), "hmi_beyond_alert_limit": int((hmi & (err > alert_limit_m)).sum()),
+            "alarms": int(np.asarray(alarm, bool).sum()),
             "error_available_m": M.pct(err[available], (50, 95, 99)),
             "pl_available_m": M.pct(pl[available], (50, 95))}
 
@@ -274,7 +277,7 @@ def run_pair(pair: Pair, warm_up_s: float, fusion: dict | None = None) -> PairRe
         s0 = int(first[0]) if first.size else len(per["gnss_raim"][0])
         figures[tid] = {}
         for m, x in per.items():
-            f = method_figures(*x[1:])
+            f = method_figures(*x[1:], CROSS_TRACK_ALERT_LIMIT_M if m == CROSS_TRACK else ALONG_TRACK_ALERT_LIMIT_M)
             run = method_figures(*(a[s0:] for a in x[1:]))
             f["after_start_up"] = {"from_s": float(x[0][s0]) if s0 < len(x[0]) else None, "epochs": run["epochs"],
                                    "available": run["available"], "availability": run["availability"]}
@@ -327,7 +330,9 @@ def summarise(results: list[PairResult]) -> dict:
                   "after_start_up": {"epochs": n_run, "available": av_run,
                                      "availability": av_run / n_run if n_run else None},
                   "tta_train_along_s": M.pct(tta_along, (50, 95)), "tta_rbc_along_s": M.pct(rbc_along, (50, 95)),
-                  "hmi": sum(f["hmi"] for f in figs), "alarms": sum(f["alarms"] for f in figs),
+                  "hmi": sum(f["hmi"] for f in figs),
+                  "hmi_beyond_alert_limit": sum(f.get("hmi_beyond_alert_limit", 0) for f in figs),
+                  "alarms": sum(f["alarms"] for f in figs),
                   "fault_outcomes": counts,
                   "tta_train_s": M.pct(tta_t, (50, 95)) | {"values": sorted(tta_t)},
                   "tta_rbc_s": M.pct(tta_r, (50, 95)) | {"values": sorted(round(x, 3) for x in tta_r)},
@@ -444,7 +449,7 @@ def _f(v, pct=False) -> str:
 def markdown(doc: dict) -> str:
     s = doc["summary"]
     cp = doc["campaign"]
-    lines = [f"# Campaign {cp['name']}", "", cp["description"], "",
+    lines = [f"# Campaign {cp['name']}", "", cp["description"] or "(no description)", "",
              f"{s['pairs']} scenario-seed pairs on lines {', '.join(s['lines'])}; fault kinds: "
              f"{', '.join(s['fault_kinds'])}. Warm-up {cp['warm_up_s']:g} s.", "", "## Must show", "",
              "| check | target | measured | result |", "| --- | --- | --- | --- |"]
@@ -452,15 +457,15 @@ def markdown(doc: dict) -> str:
         pct = c["id"].startswith("availability")
         lines.append(f"| {c['what']} | {c['target']} | {_f(c['measured'], pct)} | {_f(c['pass'])} |")
     lines += ["", "## Methods side by side (every epoch, tunnels included)", "",
-              "| method | epochs | available | availability | after start-up | HMI | alarms | "
+              "| method | epochs | available | availability | after start-up | HMI (err > PL) | of those > AL | alarms | "
               "faults alarm/missed/protected/unavailable | TTA train p50/max s (along-track faults) | "
-              "TTA RBC p50/max s (along) | TTA train max s (all) | Stanford plot |", "| --- " * 12 + "|"]
+              "TTA RBC p50/max s (along) | TTA train max s (all) | Stanford plot |", "| --- " * 13 + "|"]
     for m, f in s["methods"].items():
         fo = f["fault_outcomes"]
         tt, tr = f["tta_train_along_s"], f["tta_rbc_along_s"]
         plot = STANFORD_PNG.format(method=m) if STANFORD_PNG.format(method=m) in doc["files"] else "-"
         lines.append(f"| {m} | {f['epochs']} | {f['available']} | {_f(f['availability'], True)} | "
-                     f"{_f(f['after_start_up']['availability'], True)} | {f['hmi']} | "
+                     f"{_f(f['after_start_up']['availability'], True)} | {f['hmi']} | {f['hmi_beyond_alert_limit']} | "
                      f"{f['alarms']} | {fo['alarm']}/{fo['missed']}/{fo['protected']}/{fo['unavailable']} | "
                      f"{_f(tt['p50'])}/{_f(tt['max'])} | {_f(tr['p50'])}/{_f(tr['max'])} | "
                      f"{_f(f['tta_train_s']['max'])} | {plot} |")

@@ -46,6 +46,8 @@ def test_method_figures_count_every_epoch():
     a[7:] = False
     f = method_figures(e, PL, a, withdrawals(a))
     assert (f["epochs"], f["available"], f["hmi"], f["alarms"]) == (10, 7, 1, 1)
+    assert f["hmi_beyond_alert_limit"] == 1  # 2 m > the 1.7 m along-track alert limit
+    assert method_figures(e, PL, a, withdrawals(a), alert_limit_m=2.5)["hmi_beyond_alert_limit"] == 0
     assert f["availability"] == pytest.approx(0.7)
 
 
