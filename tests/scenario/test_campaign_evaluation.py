@@ -68,3 +68,12 @@ def test_shipped_campaign_covers_every_fault_kind_on_two_lines():
 def test_unknown_campaign_refused():
     with pytest.raises(ScenarioError, match="no such file"):
         load_campaign("no-such-campaign")
+
+
+def test_cli_refuses_an_unknown_campaign(tmp_path):
+    from typer.testing import CliRunner
+
+    from augnet.scenario.cli import app
+
+    res = CliRunner().invoke(app, ["campaign", "no-such-campaign", "--out", str(tmp_path / "out")])
+    assert res.exit_code == 2 and "no such file" in res.output
