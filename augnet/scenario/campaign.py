@@ -287,6 +287,10 @@ def run_pair(pair: Pair, warm_up_s: float, fusion: dict | None = None) -> PairRe
         a, b = fault_window(f, sc)
         for tid in affected_trains(f, sc):
             per = series[tid]
+            if f.kind == "station_coordinates":
+                # present from the first epoch: no onset to alarm on (an alarm then answers another cause), so
+                # only its HMI count; outcome missed / protected / unavailable
+                per = {m: (x[0], x[1], x[2], x[3], np.zeros_like(x[4])) for m, x in per.items()}
             outcomes = {m: fault_outcome(*per[m], a, b) for m in per}
             for o in outcomes.values():
                 o["tta_rbc_s"] = (o["tta_train_s"] + float(latency.train_to_rbc(1, RSSP1_CYCLE_S)[0])
