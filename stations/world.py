@@ -47,6 +47,7 @@ NOMINAL_TRANSIT_S = 0.075
 BLOCK_EPOCHS = 60  # epochs computed together (vectorised); results do not depend on it
 DOPPLER_NOISE_HZ = 0.02
 ATMO_RATE_STEP_S = 0.5  # half-step of the central difference giving the atmosphere's rate
+BURST_SEED_TAG = 0xB0257  # multipath bursts' per-satellite signs: their own stream, no other draw moves
 
 
 @dataclass
@@ -159,7 +160,7 @@ class World:
         self.receivers = self._build_receivers()
         # multipath bursts: (receiver row, from, to [GPST s], code [m], phase [m], per-satellite sign (N,))
         rx_row = {r.id: i for i, r in enumerate(self.receivers)}
-        rng_burst = np.random.default_rng([sc.seed, 0xB0257])
+        rng_burst = np.random.default_rng([sc.seed, BURST_SEED_TAG])
         self.bursts = []
         for f in sc.faults:
             if f.kind != "multipath_burst":
