@@ -4,7 +4,8 @@ Per train and epoch (vectorised over trains and epochs, one seeded stream per wo
 
 * the wheel rolls the true distance plus slip/slide: a Wiener process in distance, active while the train
   accelerates or brakes (|a| > `TRACTION_ACCEL_M_S2`), of intensity `SLIP_WIENER_M2_PER_S[rail]`, plus an
-  injected `odometer_slide` fault (the wheel turns `slide_fraction` slower than the train moves);
+  injected `odometer_slide` fault (the wheel turns `slide_fraction` slower than the train moves) or
+  `odometer_slip` fault (it spins `slip_fraction` faster);
 * the speed the wheel gives has white noise `SPEED_WHITE_SIGMA_M_S` per reading (integrated into the count);
 * the wheel's true radius is `wheel_radius_error_pct` larger than the calibrated one, so the counted
   revolutions map to a distance that much short (fixed per train);
@@ -78,13 +79,15 @@ def simulate_odometers(scenario: Scenario, t_s: np.ndarray, km: np.ndarray, spee
     pushing = np.abs(accel) > TRACTION_ACCEL_M_S2
     q = SLIP_WIENER_M2_PER_S[scenario.rail]
     slip = np.where(pushing, rng.standard_normal((n_tr, n_ep)) * np.sqrt(q * dt), 0.0)
-    # Injected slides: the wheel turns slower than the train moves (locked at slide_fraction = 1).
+    # Injected slides: the wheel turns slower than the train moves (locked at slide_fraction = 1); injected
+    # slips: it spins faster (slip_fraction of the train's speed on top).
     ids = [tr.id for tr in trains]
     for f in scenario.faults:
-        if f.kind != "odometer_slide":
+        if f.kind not in ("odometer_slide", "odometer_slip"):
             continue
         on = (t >= f.at_s) & (t < f.until_s)
-        slip[ids.index(f.train)] -= np.where(on, f.slide_fraction * step[ids.index(f.train)], 0.0)
+        signed = -f.slide_fraction if f.kind == "odometer_slide" else f.slip_fraction
+        slip[ids.index(f.train)] += np.where(on, signed * step[ids.index(f.train)], 0.0)
     white = rng.standard_normal((n_tr, n_ep)) * SPEED_WHITE_SIGMA_M_S * dt
     wheel_m = np.cumsum(step + slip + white, axis=1)  # distance the wheel's tread has rolled
     radius_err = np.array([tr.wheel_radius_error_pct / 100.0 for tr in trains])

@@ -21,7 +21,7 @@ class OrbitClockErrors:
     """Errors for satellites `sats`; evaluate with satellite indices and GPST times."""
 
     def __init__(self, sats, orbit_sigma_m: float, clock_sigma_ns: float, seed: int,
-                 orbital_period_s: np.ndarray, clock_steps=()):
+                 orbital_period_s: np.ndarray, clock_steps=(), clock_ramps=()):
         rng = np.random.default_rng([seed, 0x0E77])
         n = len(sats)
         self.sats = list(sats)
@@ -39,6 +39,8 @@ class OrbitClockErrors:
         self.clk_w = 2 * np.pi / np.array(CLOCK_PERIODS_S)
         # clock steps: (satellite index, GPST of the step, step [s])
         self.steps = [(self.sats.index(s), t, d) for s, t, d in clock_steps if s in self.sats]
+        # clock ramps: (satellite index, GPST start, GPST end, rate [s/s]); nominal again after the end
+        self.ramps = [(self.sats.index(s), a, b, r) for s, a, b, r in clock_ramps if s in self.sats]
 
     def rtn_m(self, sat_idx, t_gpst) -> np.ndarray:
         """(..., 3) radial, along-track, cross-track error [m] for satellites sat_idx at times t."""
@@ -64,4 +66,7 @@ class OrbitClockErrors:
         out = (self.clk_amp[sat_idx] * np.sin(self.clk_w * t + self.clk_phase[sat_idx])).sum(-1)
         for j, t_step, d in self.steps:
             out = out + np.where((np.asarray(sat_idx) == j) & (t[..., 0] >= t_step), d, 0.0)
+        for j, a, b, rate in self.ramps:
+            on = (np.asarray(sat_idx) == j) & (t[..., 0] >= a) & (t[..., 0] < b)
+            out = out + np.where(on, rate * (t[..., 0] - a), 0.0)
         return out

@@ -55,7 +55,8 @@ class RtcmStreams:
         self._sent_set = {rx.id: np.full(len(world.sats), -1) for rx in world.receivers}
         self._last_station_msgs = {rx.id: -np.inf for rx in world.receivers}
         self._last_eph = {rx.id: -np.inf for rx in world.receivers}
-        self._static = {rx.id: encode_frame(arp_message(rx.rtcm_id, rx.ecef[0])) if rx.kind == "station" else b""
+        self._static = {rx.id: encode_frame(arp_message(rx.rtcm_id, world.published_position(rx.id)))
+                        if rx.kind == "station" else b""
                         for rx in world.receivers}
         self._descr = {rx.id: encode_frame(descriptor_message(rx.rtcm_id, rx.id)) for rx in world.receivers}
         self._eph_frames: dict[int, bytes] = {}

@@ -206,27 +206,60 @@ class Errors(_Strict):
     data_gaps_per_hour: float = Field(default=0.0, ge=0.0, le=3600.0)
 
 
+# Fault kinds injected on the truth side (docs/decisions/0252-fault-injection-campaign.md); units in the names.
+FAULT_KINDS = ("satellite_clock_step", "satellite_clock_ramp", "multipath_burst", "station_outage",
+               "station_coordinates", "odometer_slide", "odometer_slip")
+
+
 class Fault(_Strict):
-    kind: Literal["satellite_clock_step", "station_outage", "odometer_slide"]
+    """One injected fault, active from at_s (until until_s where the kind has an end; seconds since start).
+
+    - satellite_clock_step: `satellite`'s true clock jumps by `step_ns` (truth minus broadcast) and stays;
+    - satellite_clock_ramp: it drifts by `ramp_ns_per_s` from at_s, back to nominal at until_s (or the end);
+    - multipath_burst: `receiver` (station or train id) gets `code_m` on the code and `phase_m` on the phase of
+      `satellite` (or, without one, of every satellite, each with a seeded random sign) from at_s to until_s;
+    - station_outage: `station` sends nothing from at_s to until_s (or the end);
+    - station_coordinates: `station`'s published coordinates (RTCM 1005 and the centre's list) are off its true
+      antenna position by `offset_enu_m` (east, north, up) for the whole run (at_s must be 0);
+    - odometer_slide: `train`'s wheel turns `slide_fraction` slower than the train moves (braking on wet rail);
+    - odometer_slip: `train`'s wheel turns `slip_fraction` faster than the train moves (spinning under traction).
+    """
+
+    kind: Literal[FAULT_KINDS]
     at_s: float = Field(ge=0.0)  # since start
     until_s: float | None = Field(default=None, ge=0.0)
     satellite: str | None = Field(default=None, pattern=r"^[GEC][0-9]{2}$")
     station: str | None = None
     step_ns: float = 0.0
-    train: str | None = None  # odometer_slide: the train whose wheels slide
+    ramp_ns_per_s: float = Field(default=0.0, ge=-1000.0, le=1000.0)  # satellite_clock_ramp [ns/s]
+    receiver: str | None = None  # multipath_burst: the receiver whose antenna sees the reflections
+    code_m: float = Field(default=0.0, ge=-100.0, le=100.0)  # multipath_burst: code bias [m]
+    phase_m: float = Field(default=0.0, ge=-0.25, le=0.25)  # multipath_burst: phase bias [m] (< lambda/4 ~ 5 cm)
+    offset_enu_m: tuple[float, float, float] = (0.0, 0.0, 0.0)  # station_coordinates: published - true [m]
+    train: str | None = None  # odometer_slide / odometer_slip: the train whose wheels slide or slip
     slide_fraction: float = Field(default=0.0, ge=0.0, le=1.0)  # wheel speed lost to the slide (1: locked)
+    slip_fraction: float = Field(default=0.0, ge=0.0, le=2.0)  # wheel speed gained by the slip (1: twice)
 
     @model_validator(mode="after")
     def _complete(self):
-        if self.kind == "satellite_clock_step" and self.satellite is None:
-            raise ValueError("satellite_clock_step needs satellite (e.g. G05)")
-        if self.kind == "station_outage" and self.station is None:
-            raise ValueError("station_outage needs station (a station id)")
-        if self.kind == "odometer_slide":
-            if self.train is None or self.until_s is None or not self.slide_fraction > 0.0:
-                raise ValueError("odometer_slide needs train, until_s and slide_fraction > 0")
-            if self.until_s <= self.at_s:
-                raise ValueError(f"odometer_slide: until_s ({self.until_s}) must be after at_s ({self.at_s})")
+        if self.kind in ("satellite_clock_step", "satellite_clock_ramp") and self.satellite is None:
+            raise ValueError(f"{self.kind} needs satellite (e.g. G05)")
+        if self.kind == "satellite_clock_ramp" and self.ramp_ns_per_s == 0.0:
+            raise ValueError("satellite_clock_ramp needs ramp_ns_per_s != 0")
+        if self.kind in ("station_outage", "station_coordinates") and self.station is None:
+            raise ValueError(f"{self.kind} needs station (a station id)")
+        if self.kind == "station_coordinates" and (self.at_s != 0.0 or not any(self.offset_enu_m)):
+            raise ValueError("station_coordinates needs at_s = 0 (published for the whole run) and offset_enu_m")
+        if self.kind == "multipath_burst":
+            if self.receiver is None or self.until_s is None or not (self.code_m or self.phase_m):
+                raise ValueError("multipath_burst needs receiver, until_s and code_m or phase_m")
+        if self.kind in ("odometer_slide", "odometer_slip"):
+            amount = self.slide_fraction if self.kind == "odometer_slide" else self.slip_fraction
+            name = "slide_fraction" if self.kind == "odometer_slide" else "slip_fraction"
+            if self.train is None or self.until_s is None or not amount > 0.0:
+                raise ValueError(f"{self.kind} needs train, until_s and {name} > 0")
+        if self.until_s is not None and self.until_s <= self.at_s and self.kind != "satellite_clock_step":
+            raise ValueError(f"{self.kind}: until_s ({self.until_s}) must be after at_s ({self.at_s})")
         return self
 
 
@@ -298,6 +331,10 @@ class Scenario(_Strict):
         if self.trains and self.line is None:
             raise ValueError("trains need a line")
         station_ids = {s.id for s in self.stations}
+        receiver_ids = station_ids | {t.id for t in self.trains}
+        for f in self.faults:
+            if f.receiver is not None and f.receiver not in receiver_ids:
+                raise ValueError(f"fault names receiver {f.receiver!r}; receivers are {sorted(receiver_ids)}")
         for f in self.faults:
             if f.station is not None and f.station not in station_ids:
                 raise ValueError(f"fault names station {f.station!r}; stations are {sorted(station_ids)}")

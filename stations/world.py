@@ -47,6 +47,7 @@ NOMINAL_TRANSIT_S = 0.075
 BLOCK_EPOCHS = 60  # epochs computed together (vectorised); results do not depend on it
 DOPPLER_NOISE_HZ = 0.02
 ATMO_RATE_STEP_S = 0.5  # half-step of the central difference giving the atmosphere's rate
+BURST_SEED_TAG = 0xB0257  # multipath bursts' per-satellite signs: their own stream, no other draw moves
 
 
 @dataclass
@@ -151,10 +152,23 @@ class World:
         period = 2 * np.pi * np.sqrt(sqrt_a**6 / gm)
         steps = [(f.satellite, self.t0 + f.at_s, f.step_ns * 1e-9) for f in sc.faults
                  if f.kind == "satellite_clock_step"]
+        ramps = [(f.satellite, self.t0 + f.at_s, self.t0 + (f.until_s if f.until_s is not None else sc.duration_s),
+                  f.ramp_ns_per_s * 1e-9) for f in sc.faults if f.kind == "satellite_clock_ramp"]
         oc = errs.orbit_clock
         self.orbit_errors = OrbitClockErrors(sats, oc.orbit_error_m if oc.enabled else 0.0,
-                                             oc.clock_error_ns if oc.enabled else 0.0, sc.seed, period, steps)
+                                             oc.clock_error_ns if oc.enabled else 0.0, sc.seed, period, steps, ramps)
         self.receivers = self._build_receivers()
+        # multipath bursts: (receiver row, from, to [GPST s], code [m], phase [m], per-satellite sign (N,))
+        rx_row = {r.id: i for i, r in enumerate(self.receivers)}
+        rng_burst = np.random.default_rng([sc.seed, BURST_SEED_TAG])
+        self.bursts = []
+        for f in sc.faults:
+            if f.kind != "multipath_burst":
+                continue
+            sign = np.zeros(n) if f.satellite is not None else rng_burst.choice([-1.0, 1.0], n)
+            if f.satellite is not None and f.satellite in sats:
+                sign[sats.index(f.satellite)] = 1.0
+            self.bursts.append((rx_row[f.receiver], self.t0 + f.at_s, self.t0 + f.until_s, f.code_m, f.phase_m, sign))
         lat_c, lon_c = self._region_centre()
         self.iono_params = resolve_ionosphere(errs.ionosphere)
         self.iono = IonosphereField(self.iono_params, lat_c, lon_c, sc.seed)
@@ -244,6 +258,17 @@ class World:
         pts = np.concatenate([r.ecef[:1] for r in self.receivers])
         llh = ecef_to_geodetic(pts)
         return float(np.degrees(llh[:, 0].mean())), float(np.degrees(llh[:, 1].mean()))
+
+    def published_position(self, receiver_id: str) -> np.ndarray:
+        """The coordinates a station publishes (RTCM 1005, the centre's station list) [ECEF m]: its true antenna
+        position, unless a `station_coordinates` fault puts them `offset_enu_m` off (a survey or datum error)."""
+        r = self.receivers[self.receiver_ids.index(receiver_id)]
+        p = r.ecef[0].copy()
+        for f in self.scenario.faults:
+            if f.kind == "station_coordinates" and f.station == receiver_id:
+                llh = ecef_to_geodetic(p)
+                p = p + enu_rotation(llh[0], llh[1]).T @ np.asarray(f.offset_enu_m, float)
+        return p
 
     @property
     def receiver_ids(self) -> list[str]:
@@ -394,6 +419,12 @@ class World:
             if trk.dropped is not None:
                 obs = obs & ~trk.dropped[..., None]
             ge = geo[e][..., None]
+            for row, a, b, code_m, phase_m, sign in self.bursts:  # injected multipath bursts (truth side)
+                if a <= t_tag[e] < b:
+                    mp_c = mp_c.copy()
+                    mp_p = mp_p.copy()
+                    mp_c[row] += code_m * sign[:, None]
+                    mp_p[row] += phase_m * sign[:, None]
             P[e] = np.where(obs, ge + iono[e] + group[e] + mp_c + n_c, np.nan)
             L[e] = np.where(obs, (ge - iono[e] + mp_p + n_p) / lam + trk.ambiguity_cyc + trk.half_cycle, np.nan)
             D[e] = np.where(obs, -phase_rate[e] / lam + doppler_noise * z_dop, np.nan)

@@ -1,5 +1,7 @@
 """`augnet scenario run SCENARIO --out DIR [--duration S] [--warm-up S]`: the whole chain faster than real time,
-a progress bar while it runs, then the targets as a table; report.json, epochs.csv and the PNG plots in DIR."""
+a progress bar while it runs, then the targets as a table; report.json, epochs.csv and the PNG plots in DIR.
+`augnet scenario campaign [CAMPAIGN] --out DIR`: a fault-injection matrix of scenarios x seeds, one report
+(augnet/scenario/campaign.py)."""
 
 from __future__ import annotations
 
@@ -66,4 +68,38 @@ def run_cmd(scenario: str = typer.Argument(..., help="built-in name (demo, basel
     console.print(f"{r['epochs']} epochs{warm} in {r['wall_s']:.1f} s ({_fmt(r['real_time_factor'])}x real time); "
                   f"wrote {', '.join(rep.files)} to {out}")
     if strict and not rep.passed:
+        raise typer.Exit(1)
+
+
+@app.command("campaign")
+def campaign_cmd(campaign: str = typer.Argument("issue15", help="built-in campaign name (issue15) or a campaign "
+                                                                "YAML file (augnet/scenario/campaigns/)"),
+                 out: Path = typer.Option(..., "--out", help="output folder (created)"),
+                 no_plots: bool = typer.Option(False, "--no-plots", help="campaign.json and campaign.md only"),
+                 strict: bool = typer.Option(False, "--strict", help="exit 1 when a must-show check fails")) -> None:
+    """Run every scenario x seed pair of a fault-injection campaign; one report (markdown + JSON + Stanford plots)."""
+    from augnet.scenario.campaign import run_campaign
+
+    console = Console()
+
+    def progress(res) -> None:
+        wm = [per["weighted_median"] for per in res.figures.values()]
+        console.print(f"{res.pair}: {res.wall_s:.0f} s; weighted median available "
+                      f"{sum(f['available'] for f in wm)}/{sum(f['epochs'] for f in wm)}, "
+                      f"HMI {sum(f['hmi'] for f in wm)}; faults {len(res.faults)}")
+
+    try:
+        doc = run_campaign(campaign, out, plots=not no_plots, on_pair=progress)
+    except ScenarioError as exc:
+        console.print(f"[red]error:[/red] {exc}")
+        raise typer.Exit(2) from None
+    table = Table(title=f"campaign {doc['campaign']['name']}: must show ({out / 'campaign.md'})")
+    for col in ("check", "target", "measured", "result"):
+        table.add_column(col)
+    for c in doc["summary"]["checks"]:
+        table.add_row(c["what"], c["target"], _fmt(c["measured"]),
+                      "[green]pass[/green]" if c["pass"] else "[red]FAIL[/red]")
+    console.print(table)
+    console.print(f"wrote {', '.join(doc['files'])} to {out}")
+    if strict and not all(c["pass"] for c in doc["summary"]["checks"]):
         raise typer.Exit(1)

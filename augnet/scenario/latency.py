@@ -23,6 +23,7 @@ CENTRE_PROCESSING_S = 0.10  # network solution + VRS synthesis + encoding per ep
 DOWNLINK_MEDIAN_S = 0.25  # caster -> train over a cellular bearer, one way
 DOWNLINK_SIGMA_LN = 0.5  # lognormal shape: ~2 % of epochs slower than 0.7 s, arriving after the next epoch
 SEED_TAG = 0x1A7E  # keeps this stream of draws apart from the simulator's own
+RBC_SEED_TAG = 0x2BC  # the train -> RBC draws, apart from the downlink's (adding them changes no VRS arrival)
 
 
 class LatencyModel:
@@ -33,6 +34,7 @@ class LatencyModel:
         self.downlink_median_s = downlink_median_s
         self.downlink_sigma_ln = downlink_sigma_ln
         self._rng = np.random.default_rng([seed, SEED_TAG])
+        self._rbc_rng = np.random.default_rng([seed, RBC_SEED_TAG])
 
     def station_arrival(self, t_gpst: float) -> float:
         """When a station epoch tagged t reaches the centre."""
@@ -41,6 +43,14 @@ class LatencyModel:
     def downlink(self, n: int) -> np.ndarray:
         """n independent one-way downlink delays [s] (one per train session and epoch)."""
         return self.downlink_median_s * np.exp(self.downlink_sigma_ln * self._rng.standard_normal(n))
+
+    def train_to_rbc(self, n: int, cycle_s: float) -> np.ndarray:
+        """n delays [s] from an alarm raised at the train to the RBC acting on it: the train's RSSP-I main cycle
+        sends it at the next cycle (uniform wait up to `cycle_s`), the cellular bearer carries it one way (the
+        downlink's distribution, the same bearer), the RBC reads it at its next cycle (uniform wait again)."""
+        rng = self._rbc_rng
+        bearer = self.downlink_median_s * np.exp(self.downlink_sigma_ln * rng.standard_normal(n))
+        return rng.uniform(0.0, cycle_s, n) + bearer + rng.uniform(0.0, cycle_s, n)
 
     def describe(self) -> dict:
         return {"station_uplink_s": self.uplink_s, "centre_processing_s": self.processing_s,

@@ -288,7 +288,7 @@ class Chain:
     """The system under test wired in-process, fed one simulator block at a time."""
 
     def __init__(self, world: WarmUpWorld, scenario: Scenario, options: RtkOptions | None = None,
-                 correction_bound: bool = False):
+                 correction_bound: bool = False, fusion: dict | None = None):
         self.world = world
         self.scenario = sc = scenario
         self.t0 = world.start_gpst  # the scenario's start: the trains' time 0
@@ -304,7 +304,8 @@ class Chain:
         self.station_names = [r.id for r in rx if r.kind == "station" and not r.id.startswith(CHECK_POINT_PREFIX)]
         if len(self.station_names) < 1:
             raise ScenarioError(f"scenario {sc.name}: no reference stations")
-        self.stations = {r.id: r.ecef[0].copy() for r in rx if r.id in self.station_names}
+        # the coordinates the stations publish (a station_coordinates fault puts them off the truth)
+        self.stations = {r.id: world.published_position(r.id) for r in rx if r.id in self.station_names}
         self.check_points = {r.id: r.ecef[0].copy() for r in rx
                              if r.kind == "station" and r.id.startswith(CHECK_POINT_PREFIX)}
         # correction_bound: the VRS carry the centre's 4001 bound, which the trains take into their PLs (0281)
@@ -331,7 +332,9 @@ class Chain:
             cfg = train_cfg[r.id]
             # the onboard knows its tachometer and its orientation on the journey, not the wheel's true radius
             odo_model = OdometerModel(pulses_per_rev=cfg.odometer_pulses_per_rev, sample_interval_s=sc.interval_s)
-            settings = FusionSettings(direction=cfg.direction, integrity_risk=unit.integrity_risk)
+            # `fusion`: FusionSettings fields to override (a campaign's detection-disabled control run)
+            settings = FusionSettings(**{"direction": cfg.direction, "integrity_risk": unit.integrity_risk,
+                                         **(fusion or {})})
             fusions = {m: AlongTrackFusion(m, odo_model, settings) for m in METHODS}
             log.fused = {m: [] for m in METHODS}
             self.trains[r.id] = _Train(log, i, unit, CorrectionDecoder(), collections.deque(), RepositionPolicy(),
@@ -622,14 +625,15 @@ class Chain:
 
 def simulate(scenario: str | Path | Scenario, *, duration_s: float | None = None,
              on_epoch: Callable[[], None] | None = None, options: RtkOptions | None = None,
-             warm_up_s: float | None = None, correction_bound: bool = False) -> RunLog:
+             warm_up_s: float | None = None, correction_bound: bool = False,
+             fusion: dict | None = None) -> RunLog:
     """Run the chain over the warm-up and the whole scenario and return the per-epoch record (no files
-    written). `warm_up_s`: see `warm_up_s_for`."""
+    written). `warm_up_s`: see `warm_up_s_for`; `fusion`: FusionSettings fields overridden in every train."""
     sc = load(scenario, duration_s)
     warm = warm_up_s_for(sc, warm_up_s)
     start = wallclock.perf_counter()
     world = WarmUpWorld(sc, warm)
-    chain = Chain(world, sc, options, correction_bound=correction_bound)
+    chain = Chain(world, sc, options, correction_bound=correction_bound, fusion=fusion)
     for blk in world.epochs():
         chain.add_block(blk, on_epoch)
     log = chain.log()
