@@ -220,7 +220,8 @@ def train_figures(log, tl, alert_limit_m: float) -> tuple[dict, dict]:
     # track identity
     track = np.array(tl.track, dtype=object)
     confirmed = np.array(tl.confirmed, bool)
-    right = has_pos & (track == tl.truth_track)
+    truth_track = np.array(tl.truth_edge, dtype=object) if tl.truth_edge else tl.truth_track  # layout: per epoch
+    right = has_pos & (track == truth_track)
     off_map = has_pos & (track == "")
     wrong = has_pos & ~right & ~off_map
     # correction age
