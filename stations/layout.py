@@ -272,7 +272,7 @@ class Layout:
         edges = [{"id": e.id, "track": e.track, "kind": e.kind, "begin": e.begin, "end": e.end,
                   "points": np.round(self.plane_to_geodetic(e.xy, e.z), 10).tolist(),
                   "km": np.round(e.km, 7).tolist()} for e in self.edges.values()]
-        turnouts = [dict(id=t, course=self._course(t), frog_m=self._frog_m(t), **legs)
+        turnouts = [dict(id=t, course=self._course(t), frog_m=self.frog_m(t), **legs)
                     for t, legs in self.turnouts.items()]
         return {"format": FORMAT, "name": f"{self.name} (as built, truth)", "nodes": nodes, "edges": edges,
                 "turnouts": turnouts}
@@ -285,7 +285,7 @@ class Layout:
         d = self._design_direction(t["diverging"], div_side)
         return "left" if fwd[0] * d[1] - fwd[1] * d[0] > 0 else "right"
 
-    def _frog_m(self, sw: str, gauge_m: float = 1.435) -> float:
+    def frog_m(self, sw: str, gauge_m: float = 1.435) -> float:
         """Distance along the as-built diverging leg to where it is one standard gauge from the straight."""
         t = self.turnouts[sw]
         div, st = self.edges[t["diverging"]], self.edges[t["straight"]]
