@@ -43,6 +43,9 @@ LATERAL_ACCEL_M_S2 = 0.65
 # Built-in layouts (stations/layouts/<name>.json).
 BUILTIN_LAYOUTS = ("alpha-beta",)
 NODE_DEGREE = {"joint": 2, "switch": 3, "buffer_stop": 1, "open_end": 1}
+# Standard gauge (UIC, 1435 mm): the frog is where the legs' centre lines are one gauge apart (as
+# augnet.track.topology.STANDARD_GAUGE_M; located here on the 1 m truth samples, to the next sample).
+STANDARD_GAUGE_M = 1.435
 
 
 class LayoutError(ValueError):
@@ -285,7 +288,7 @@ class Layout:
         d = self._design_direction(t["diverging"], div_side)
         return "left" if fwd[0] * d[1] - fwd[1] * d[0] > 0 else "right"
 
-    def frog_m(self, sw: str, gauge_m: float = 1.435) -> float:
+    def frog_m(self, sw: str, gauge_m: float = STANDARD_GAUGE_M) -> float:
         """Distance along the as-built diverging leg to where it is one standard gauge from the straight."""
         t = self.turnouts[sw]
         div, st = self.edges[t["diverging"]], self.edges[t["straight"]]

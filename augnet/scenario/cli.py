@@ -4,7 +4,7 @@ a progress bar while it runs, then the targets as a table; report.json, epochs.c
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
+from typing import List, Optional
 
 import typer
 from rich.console import Console
@@ -66,4 +66,40 @@ def run_cmd(scenario: str = typer.Argument(..., help="built-in name (demo, basel
     console.print(f"{r['epochs']} epochs{warm} in {r['wall_s']:.1f} s ({_fmt(r['real_time_factor'])}x real time); "
                   f"wrote {', '.join(rep.files)} to {out}")
     if strict and not rep.passed:
+        raise typer.Exit(1)
+
+
+@app.command("track-id")
+def track_id_cmd(scenario: str = typer.Argument("alpha-beta", help="a scenario with a layout"),
+                 track_map: Optional[List[Path]] = typer.Option(None, "--map", help="augnet-topology/1 map the "
+                                                                "identifier uses (repeatable; default: the as-built "
+                                                                "truth exported by the simulator)"),
+                 duration: Optional[float] = typer.Option(None, "--duration", help="simulate only the first S seconds"),
+                 warm_up: float = typer.Option(60.0, "--warm-up", help="seconds the centre runs before the trains"),
+                 json_out: Optional[Path] = typer.Option(None, "--json", help="also write the totals here")) -> None:
+    """Track identification on the onboard solutions of the full chain, per switch passage against truth."""
+    import json
+
+    from augnet.scenario.runner import simulate
+    from augnet.scenario.track_identification import identify
+    from augnet.track.topology import Topology
+    from augnet.track.topology_file import load_topology
+    from stations.layout import Layout
+
+    log = simulate(scenario, duration_s=duration, warm_up_s=warm_up)
+    if log.scenario.layout is None:
+        typer.echo(f"scenario {log.scenario.name} has no layout", err=True)
+        raise typer.Exit(2)
+    layout = Layout.load(log.scenario.layout.file)
+    maps = [load_topology(p) for p in track_map] if track_map else [Topology.from_dict(layout.truth_topology_dict())]
+    totals, wrong = [], 0
+    for topo in maps:
+        res = identify(log, topo, layout)
+        typer.echo(f"map: {topo.name}" + (f" (accuracy {topo.accuracy})" if topo.accuracy else ""))
+        typer.echo(res.text())
+        totals.append({"map": topo.name, **res.totals()})
+        wrong += res.wrong
+    if json_out is not None:
+        json_out.write_text(json.dumps(totals, indent=1))
+    if wrong:
         raise typer.Exit(1)

@@ -42,6 +42,7 @@ class ChainIdentification:
     no_fix: int = 0
     passages: list[SwitchPassage] = field(default_factory=list)
     wrong_details: list[str] = field(default_factory=list)
+    unknown_at: list[tuple[str, float, int]] = field(default_factory=list)  # (train, t [s], solution status)
 
     def totals(self) -> dict:
         facing = [p for p in self.passages if p.facing]
@@ -50,6 +51,8 @@ class ChainIdentification:
             "epochs": self.epochs, "with_fix": self.with_fix, "decided": self.decided, "wrong": self.wrong,
             "unknown": self.unknown, "inconsistent": self.inconsistent, "no_fix": self.no_fix,
             "unknown_pct_of_fixes": 100.0 * self.unknown / max(self.with_fix, 1),
+            "unknown_on_fixed_solutions": sum(1 for x in self.unknown_at if x[2] == 1),
+            "unknown_last_t_s": max((x[1] for x in self.unknown_at), default=math.nan),
             "correct_pct_of_decided": 100.0 * (self.decided - self.wrong) / max(self.decided, 1),
             "facing_switches": len(facing), "facing_decided": int(len(d)),
             "trailing_switches": len(self.passages) - len(facing),
@@ -125,6 +128,7 @@ def identify(log, topology: Topology, layout: Layout | None = None) -> ChainIden
                                              f"{d.track}, truth {truth_track} ({tl.truth_edge[k]})")
             elif d.status == "unknown":
                 res.unknown += 1
+                res.unknown_at.append((cfg.id, float(t), int(tl.status[k]) if k < len(getattr(tl, "status", [])) else -1))
             elif d.status == "inconsistent":
                 res.inconsistent += 1
             else:

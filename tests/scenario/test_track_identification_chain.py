@@ -7,8 +7,11 @@ import pytest
 
 from augnet.scenario.runner import load, simulate
 from augnet.scenario.track_identification import identify
+from augnet.track.survey_map import build_map
 from augnet.track.topology import Topology
-from stations.layout import Layout
+from augnet.track.topology_file import load_topology
+from stations.layout import Layout, layout_path
+from stations.survey import survey_run
 from tests.conftest import LONG_RUN_TIMEOUT_S
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(LONG_RUN_TIMEOUT_S)]
@@ -30,3 +33,7 @@ def test_crossover_both_ways_right_track_in_every_decided_epoch():
     assert sorted(p.switch for p in facing) == ["swA1", "swA2"] and all(p.leg_track == "X12" for p in facing)
     assert all(p.decided_after_frog_m < 60.0 for p in facing), [p.decided_after_frog_m for p in facing]
     assert len(res.passages) == 4 and all(p.wrong == 0 for p in res.passages)
+    # the same solutions on the map built from a survey run (the estimator's map, not the truth's)
+    built = build_map(load_topology(layout_path(sc.layout.file)), survey_run(layout, 1)[0])
+    on_built = identify(log, built.topology, layout).totals()
+    assert on_built["wrong"] == 0 and on_built["facing_decided"] == 2, on_built

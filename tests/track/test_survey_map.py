@@ -141,3 +141,26 @@ def test_alpha_beta_built_from_a_simulated_survey_keeps_topology_and_is_centimet
     assert np.percentile(err, 95) <= acc["horizontal_95_m"] < 0.04 and err.max() < 0.06, (acc, err.max())
     # the design chords are decimetres off the as-built crossover: the reason the map is surveyed
     assert map_error_m(desc, truth).max() > 0.3
+
+
+@pytest.mark.slow
+def test_cli_survey_then_build_map_writes_the_map_with_its_accuracy(tmp_path):
+    from typer.testing import CliRunner
+
+    from augnet.track.cli import app as track_app
+    from augnet.track.topology_file import load_topology
+    from stations.cli import sim_app
+    from stations.layout import layout_path
+
+    runner = CliRunner()
+    for seed in (1, 2):
+        r = runner.invoke(sim_app, ["survey", "--seed", str(seed), "--out", str(tmp_path / f"s{seed}.json")])
+        assert r.exit_code == 0, r.output
+    r = runner.invoke(track_app, ["build-map", "--layout", str(layout_path("alpha-beta")), "--survey",
+                                  str(tmp_path / "s1.json"), "--verify", str(tmp_path / "s2.json"),
+                                  "--out", str(tmp_path / "map.json")])
+    assert r.exit_code == 0, r.output
+    built = load_topology(tmp_path / "map.json")
+    assert built.accuracy["verified_against"] == "survey seed 2" and built.accuracy["horizontal_95_m"] < 0.04
+    r = runner.invoke(sim_app, ["survey", "--gap", "t1b:100", "--out", str(tmp_path / "bad.json")])
+    assert r.exit_code == 2 and "EDGE:FROM_M:TO_M" in r.output
