@@ -34,6 +34,8 @@ from pathlib import Path
 import numpy as np
 from pyproj import Transformer
 
+from stations.scenario import ScenarioError
+
 FORMAT = "augnet-topology/1"  # same tag as augnet.track.topology.FORMAT (stations may not import augnet.track)
 # Truth sampling along every edge [m]: sagitta step^2 / (8 R) = 0.9 mm at the crossover's ~136 m radius.
 SAMPLE_M = 1.0
@@ -48,8 +50,8 @@ NODE_DEGREE = {"joint": 2, "switch": 3, "buffer_stop": 1, "open_end": 1}
 STANDARD_GAUGE_M = 1.435
 
 
-class LayoutError(ValueError):
-    """A layout file or route that cannot be used; names the element."""
+class LayoutError(ScenarioError):
+    """A layout file or route that cannot be used; names the element (a scenario error: the CLIs report it)."""
 
 
 @dataclass(frozen=True)

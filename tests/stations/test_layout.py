@@ -97,3 +97,14 @@ def _lat_lon(p):
     from augnet.gnss.geometry import ecef_to_geodetic
     llh = ecef_to_geodetic(p)
     return llh[0], llh[1]
+
+
+def test_a_bad_route_or_layout_file_is_a_scenario_error_naming_it():
+    d = load_scenario("alpha-beta").model_dump(mode="json")
+    d["trains"][0]["route"] = ["t1a.0", "t2a.1"]
+    with pytest.raises(ScenarioError, match="t2a.1 does not follow t1a.0"):
+        World(parse_scenario(d))
+    d = load_scenario("alpha-beta").model_dump(mode="json")
+    d["layout"]["file"] = "/nonexistent/layout.json"
+    with pytest.raises(ScenarioError, match="cannot read"):
+        World(parse_scenario(d))
