@@ -72,6 +72,33 @@ def show(scenario: str = typer.Argument(DEFAULT_SCENARIO, help="built-in name or
     typer.echo(json.dumps(resolved_dict(sc), indent=2, sort_keys=True))
 
 
+@sim_app.command("survey")
+def survey_cmd(layout: str = typer.Option("alpha-beta", "--layout", help="built-in layout or augnet-topology/1 file"),
+               seed: int = typer.Option(1, "--seed", help="the run's seed (another seed: an independent run)"),
+               gap: List[str] = typer.Option([], "--gap", help="EDGE:FROM_M:TO_M, no positions there (repeatable)"),
+               out: Path = typer.Option(..., "--out", help="survey record (augnet-survey/1 JSON)"),
+               truth_out: Optional[Path] = typer.Option(None, "--truth", help="also write the truth (outliers)")) -> None:
+    """A survey train runs every edge of the layout once, recording GNSS positions with their errors."""
+    from stations.layout import Layout, LayoutError
+    from stations.survey import survey_run
+
+    try:
+        gaps = tuple((g.split(":")[0], float(g.split(":")[1]), float(g.split(":")[2])) for g in gap)
+    except (IndexError, ValueError):
+        typer.echo(f"error: --gap is EDGE:FROM_M:TO_M, got {gap}", err=True)
+        raise typer.Exit(2)
+    try:
+        lay = Layout.load(layout)
+    except LayoutError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2)
+    record, truth = survey_run(lay, seed, gaps=gaps)
+    out.write_text(json.dumps(record))
+    if truth_out is not None:
+        truth_out.write_text(json.dumps(truth))
+    typer.echo(f"{len(record['runs'])} runs, {sum(len(r['points']) for r in record['runs'])} positions -> {out}")
+
+
 @sim_app.command("record")
 def record_cmd(
     scenario: str = typer.Argument(DEFAULT_SCENARIO, help="built-in name or YAML file"),

@@ -48,27 +48,39 @@ def train_motion(train: Train, line_length_m: float, t_s: np.ndarray) -> TrainMo
         inside = (s_grid >= lo) & (s_grid < hi)
         limit[inside] = np.minimum(limit[inside], p.speed_kmh / 3.6)
     limit[-1] = 0.0  # stop at the end of the line
-    # Backward pass: the braking curve to every lower limit ahead.
+    allowed = braking_curve(u, limit, train.decel_m_s2)  # the braking curve to every lower limit ahead
+    ut, vt, at = drive(u, allowed, route_len, min(train.start_speed_kmh / 3.6, allowed[0]), train.accel_m_s2,
+                       train.decel_m_s2, t_s)
+    return TrainMotion(np.asarray(t_s, float), start + d * ut, vt, at, d)
+
+
+def braking_curve(u: np.ndarray, limit: np.ndarray, decel_m_s2: float) -> np.ndarray:
+    """The highest speed at each grid point (spacing `GRID_M`) from which every lower limit ahead is met."""
     allowed = limit.copy()
-    two_d_dx = 2.0 * train.decel_m_s2 * GRID_M
+    two_d_dx = 2.0 * decel_m_s2 * GRID_M
     for i in range(len(u) - 2, -1, -1):
         allowed[i] = min(allowed[i], np.sqrt(allowed[i + 1] ** 2 + two_d_dx))
+    return allowed
+
+
+def drive(u: np.ndarray, allowed: np.ndarray, route_len: float, v0: float, accel_m_s2: float, decel_m_s2: float,
+          t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Distance along the route (stopping at `route_len`), speed and acceleration at times t_s of the driver
+    model: accelerate up to the allowed speed (`allowed` on the grid `u`, braking curves included)."""
     t_end = float(np.max(t_s)) if len(t_s) else 0.0
     n = int(np.ceil(t_end / STEP_S)) + 2
     tt = np.arange(n) * STEP_S
     uu = np.zeros(n)
     vv = np.zeros(n)
     aa = np.zeros(n)
-    v = min(train.start_speed_kmh / 3.6, allowed[0])
+    v = v0
     pos = 0.0
     for k in range(n):
         uu[k], vv[k] = pos, v
         cap = float(np.interp(pos, u, allowed))
-        v_next = min(v + train.accel_m_s2 * STEP_S, cap)
-        v_next = max(v_next, v - train.decel_m_s2 * STEP_S * 1.5, 0.0)
+        v_next = min(v + accel_m_s2 * STEP_S, cap)
+        v_next = max(v_next, v - decel_m_s2 * STEP_S * 1.5, 0.0)
         aa[k] = (v_next - v) / STEP_S
         pos = min(pos + 0.5 * (v + v_next) * STEP_S, route_len)
         v = v_next if pos < route_len else 0.0
-    ut = np.interp(t_s, tt, uu)
-    return TrainMotion(np.asarray(t_s, float), start + d * ut, np.interp(t_s, tt, vv),
-                       np.interp(t_s, tt, aa), d)
+    return np.interp(t_s, tt, uu), np.interp(t_s, tt, vv), np.interp(t_s, tt, aa)

@@ -25,7 +25,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from augnet.gnss.signals import DEFAULT_SIGNALS, SYSTEMS, UnknownSignal, by_rinex
 
-BUILTIN_SCENARIOS = ("demo", "baseline-10km", "network-70km", "iono-storm", "catnet-like")
+BUILTIN_SCENARIOS = ("demo", "baseline-10km", "network-70km", "iono-storm", "catnet-like", "alpha-beta")
 DEFAULT_SCENARIO = "demo"
 
 
@@ -146,6 +146,9 @@ class Train(_Strict):
     # train: wear between calibrations), and the tachometer's pulses per wheel revolution.
     wheel_radius_error_pct: float = Field(default=0.0, ge=-3.0, le=3.0)
     odometer_pulses_per_rev: int = Field(default=200, ge=1, le=10_000)
+    # On a track layout (Scenario.layout): the edges the train runs over, in travel order, the first one
+    # from start_km in `direction` (stations/layout.py checks it against the layout's switches).
+    route: list[str] = Field(default_factory=list)
 
 
 class Ionosphere(_Strict):
@@ -209,6 +212,14 @@ class Errors(_Strict):
 # Fault kinds injected on the truth side (docs/decisions/0252-fault-injection-campaign.md); units in the names.
 FAULT_KINDS = ("satellite_clock_step", "satellite_clock_ramp", "multipath_burst", "station_outage",
                "station_coordinates", "odometer_slide", "odometer_slip")
+
+
+class TrackLayout(_Strict):
+    """A track layout with turnouts the trains run over (stations/layout.py): an augnet-topology/1 file
+    (a built-in name such as `alpha-beta`, or a path; relative paths are taken from the scenario file's
+    directory when the scenario is loaded from a file)."""
+
+    file: str
 
 
 class Fault(_Strict):
@@ -276,6 +287,7 @@ class Scenario(_Strict):
         "G": ["1C", "2W"], "E": ["1C", "5Q"], "C": ["2I", "6I"]})
     elevation_mask_deg: float = Field(default=10.0, ge=0.0, le=60.0)
     line: Line | None = None
+    layout: TrackLayout | None = None  # trains with a route run over it instead of the line's tracks
     stations: list[Station] = Field(min_length=1)
     trains: list[Train] = Field(default_factory=list)
     errors: Errors = Errors()
@@ -328,8 +340,13 @@ class Scenario(_Strict):
         for st in self.stations:
             if st.km is not None and self.line is None:
                 raise ValueError(f"station {st.id} is placed by km but the scenario has no line")
-        if self.trains and self.line is None:
-            raise ValueError("trains need a line")
+        if self.trains and self.line is None and self.layout is None:
+            raise ValueError("trains need a line or a layout")
+        for t in self.trains:
+            if self.layout is not None and not t.route:
+                raise ValueError(f"train {t.id}: the scenario has a layout, give the train's route (edge ids)")
+            if self.layout is None and t.route:
+                raise ValueError(f"train {t.id} has a route but the scenario has no layout")
         station_ids = {s.id for s in self.stations}
         receiver_ids = station_ids | {t.id for t in self.trains}
         for f in self.faults:
@@ -344,7 +361,7 @@ class Scenario(_Strict):
                 raise ValueError(f"fault names train {f.train!r}; trains are {sorted(train_ids)}")
         if self.line is not None:
             for t in self.trains:
-                if t.track > self.line.tracks:
+                if not t.route and t.track > self.line.tracks:
                     raise ValueError(f"train {t.id} on track {t.track}, the line has {self.line.tracks}")
         return self
 
@@ -454,7 +471,12 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
         raise ScenarioError(f"scenario {source}: not valid YAML: {exc}") from None
-    return parse_scenario(data, source)
+    sc = parse_scenario(data, source)
+    if sc.layout is not None and str(name_or_path) not in BUILTIN_SCENARIOS:
+        f = Path(sc.layout.file)
+        if not f.is_absolute() and (Path(name_or_path).parent / f).is_file():
+            sc = sc.model_copy(update={"layout": TrackLayout(file=str(Path(name_or_path).parent / f))})
+    return sc
 
 
 def resolved_dict(scenario: Scenario) -> dict:

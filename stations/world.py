@@ -34,7 +34,8 @@ from augnet.gnss.geometry import ecef_to_geodetic, enu_rotation, geodetic_deg_to
 from augnet.gnss.signals import by_rinex
 from stations import constellation as const
 from stations.ionosphere import IonosphereField, delay_m
-from stations.kinematics import train_motion
+from stations.kinematics import GRID_M, braking_curve, drive, train_motion
+from stations.layout import Layout
 from stations.orbit_errors import OrbitClockErrors
 from stations.receiver_errors import GRADES, NoiseAndMultipath, ReceiverClocks, cnr_dbhz, elevation_scale
 from stations.scenario import Scenario, resolve_ionosphere
@@ -65,6 +66,9 @@ class Receiver:
     cutting_deg: np.ndarray | None = None  # (n_epochs,) cutting wall angle since the last epoch
     heading_rad: np.ndarray | None = None  # (n_epochs,) azimuth of the direction of travel
     outage: np.ndarray | None = None  # (n_epochs,) bool: no data (station outage)
+    # trains on a layout route (truth): the edge of each epoch, and the distance run along the route [m]
+    edge: np.ndarray | None = None  # (n_epochs,) edge ids
+    route_m: np.ndarray | None = None
 
 
 @dataclass
@@ -113,6 +117,8 @@ class World:
         self.track = TrackLine(sc.line) if sc.line is not None else None
         if self.track is not None:
             check_on_line(sc, self.track)
+        self.layout = Layout.load(sc.layout.file) if sc.layout is not None else None
+        self.routes = {}  # train id -> stations.layout.Route
         # constellation: our nominal one, or the satellites of a given nav file
         t_end = self.t_tags[-1]
         if nav_ephemerides is None:
@@ -232,6 +238,9 @@ class World:
                                 st.grade, np.broadcast_to(ecef, (self.n_epochs, 3)).copy(),
                                 np.zeros((self.n_epochs, 3)), outage=out_mask))
         for j, tr in enumerate(sc.trains):
+            if tr.route:
+                out.append(self._route_receiver(tr, j, t_rel))
+                continue
             m = train_motion(tr, self.track.length_m, t_rel)
             off = self.track.track_offset_m(tr.track)
             enu = self.track.point(m.s_m, off, tr.antenna_height_m)
@@ -253,6 +262,39 @@ class World:
                                 heading_rad=heading,
                                 outage=np.zeros(self.n_epochs, bool)))
         return out
+
+    def _route_receiver(self, tr, j: int, t_rel: np.ndarray) -> Receiver:
+        """A train running its route over the layout: speed limited by the line speed, the scenario's
+        restrictions (by km) and the curves (stations.layout.LATERAL_ACCEL_M_S2); it stops at the route's end."""
+        route = self.layout.route(tr.route, tr.direction, tr.start_km)
+        self.routes[tr.id] = route
+        u = np.arange(0.0, route.length_m + GRID_M, GRID_M)
+        limit = route.speed_limit_m_s(u, tr.speed_kmh / 3.6)
+        km_grid = np.interp(u, route.u_m, route.km)
+        prof = sorted(tr.speed_profile, key=lambda p: p.from_km)
+        for k, p in enumerate(prof):
+            lo, hi = p.from_km, prof[k + 1].from_km if k + 1 < len(prof) else np.inf
+            inside = (km_grid >= lo) & (km_grid < hi)  # as train_motion: from its km to the next entry's
+            limit[inside] = np.minimum(limit[inside], p.speed_kmh / 3.6)
+        limit[-1] = 0.0  # stop at the end of the route
+        allowed = braking_curve(u, limit, tr.decel_m_s2)
+        um, v, _ = drive(u, allowed, route.length_m, min(tr.start_speed_kmh / 3.6, allowed[0]), tr.accel_m_s2,
+                         tr.decel_m_s2, t_rel)
+        xy, z, km, ei, _ = route.at(um)
+        ecef = self.layout.plane_to_ecef(xy, z + tr.antenna_height_m)
+        xy2, z2, *_ = route.at(um + 0.5)  # 0.5 m ahead: the direction of motion
+        ahead = self.layout.plane_to_ecef(xy2, z2 + tr.antenna_height_m)
+        unit = ahead - ecef
+        unit /= np.maximum(np.linalg.norm(unit, axis=1, keepdims=True), 1e-12)
+        llh0 = ecef_to_geodetic(ecef)
+        v_enu = np.einsum("eij,ej->ei", enu_rotation(llh0[:, 0], llh0[:, 1]), unit)
+        zeros = np.zeros(self.n_epochs)
+        edges = np.array(route.edges, dtype=object)[ei]
+        return Receiver(tr.id, "train", 3000 + j, tr.grade, ecef, unit * v[:, None],
+                        track_id=self.layout.edges[route.edges[0]].track, km=km, speed_m_s=v,
+                        swept_mask_deg=zeros.copy(), cutting_deg=zeros.copy(),
+                        heading_rad=np.arctan2(v_enu[:, 0], v_enu[:, 1]), outage=np.zeros(self.n_epochs, bool),
+                        edge=edges, route_m=um)
 
     def _region_centre(self):
         pts = np.concatenate([r.ecef[:1] for r in self.receivers])

@@ -268,7 +268,11 @@ class TrackDatabase:
             best[self._trk[j]] = j
             best_d[self._trk[j]] = dist[j]
         cross = {self._track_ids[k]: float(d[best[k]] @ self._N[best[k]]) for k in range(n_tr) if best[k] >= 0}
-        near = {k: v for k, v in cross.items() if abs(v) <= CANDIDATE_RADIUS_M}
+        # a candidate lies within the radius horizontally: beyond a track's end the offset to its end point
+        # has an along-track part (a collinear track segment 1 km ahead is no candidate, whatever its cross)
+        horiz = {self._track_ids[k]: math.sqrt(max(best_d[k] ** 2 - float(d[best[k]] @ self._U[best[k]]) ** 2, 0.0))
+                 for k in range(n_tr) if best[k] >= 0}
+        near = {k: v for k, v in cross.items() if abs(v) <= CANDIDATE_RADIUS_M and horiz[k] <= CANDIDATE_RADIUS_M}
         k_best = int(np.argmin(best_d))
         j = best[k_best]
         tid = self._track_ids[k_best]
@@ -277,9 +281,9 @@ class TrackDatabase:
             m = _off_map(f"{abs(c):.1f} m from the nearest track {tid}, outside the {gate_m:.0f} m gate")
             m.candidates = near
             return m
-        # nearest track by horizontal cross-track offset among candidates
+        # nearest track by horizontal distance among candidates (= the cross-track offset within a track's span)
         if near:
-            tid = min(near, key=lambda k: abs(near[k]))
+            tid = min(near, key=lambda k: horiz[k])
             k_best = self._track_ids.index(tid)
             j = best[k_best]
             c = near[tid]

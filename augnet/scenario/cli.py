@@ -6,7 +6,7 @@ a progress bar while it runs, then the targets as a table; report.json, epochs.c
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
+from typing import List, Optional
 
 import typer
 from rich.console import Console
@@ -102,4 +102,65 @@ def campaign_cmd(campaign: str = typer.Argument("issue15", help="built-in campai
     console.print(table)
     console.print(f"wrote {', '.join(doc['files'])} to {out}")
     if strict and not all(c["pass"] for c in doc["summary"]["checks"]):
+        raise typer.Exit(1)
+
+
+@app.command("track-id")
+def track_id_cmd(scenario: str = typer.Argument("alpha-beta", help="a scenario with a layout"),
+                 track_map: Optional[List[Path]] = typer.Option(None, "--map", help="augnet-topology/1 map the "
+                                                                "identifier uses (repeatable; default: the as-built "
+                                                                "truth exported by the simulator)"),
+                 seeds: Optional[str] = typer.Option(None, "--seeds", help="a campaign: seeds FROM-TO (inclusive)"),
+                 vary: bool = typer.Option(False, "--vary", help="campaign: move each train's start back 0-30 m "
+                                                                 "and draw its speed 80-120 km/h per seed"),
+                 warm_up: float = typer.Option(60.0, "--warm-up", help="seconds the centre runs before the trains"),
+                 json_out: Optional[Path] = typer.Option(None, "--json", help="also write the totals here")) -> None:
+    """Track identification on the onboard solutions of the full chain, per switch passage against truth."""
+    import json
+
+    from augnet.scenario.runner import load
+    from augnet.scenario.track_identification import campaign, merged
+    from augnet.track.topology import Topology
+    from augnet.track.topology_file import load_topology
+    from stations.layout import Layout
+
+    try:
+        sc = load(scenario)
+        if sc.layout is None:
+            raise ScenarioError(f"scenario {sc.name} has no layout")
+        layout = Layout.load(sc.layout.file)
+        if seeds:
+            a, _, b = seeds.partition("-")
+            seed_list = list(range(int(a), int(b or a) + 1))
+        else:
+            seed_list = [sc.seed]
+    except (ScenarioError, ValueError) as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2) from None
+    maps = {}
+    for p in track_map or []:
+        t = load_topology(p)
+        maps[f"{t.name} [{p}]"] = t
+    if not maps:
+        t = Topology.from_dict(layout.truth_topology_dict())
+        maps[t.name] = t
+
+    def progress(seed, name, res):
+        t = res.totals()
+        typer.echo(f"seed {seed} {name}: decided {t['decided']} / {t['epochs']}, wrong {t['wrong']}, unknown "
+                   f"{t['unknown']}, facing {t['facing_decided']} / {t['facing_switches']}, after the frog "
+                   f"{t['after_frog_m']}")
+
+    results = campaign(sc, seed_list, maps, vary=vary, warm_up_s=warm_up, progress=progress)
+    totals, wrong = [], 0
+    for name, rs in results.items():
+        m = merged(rs)
+        acc = maps[name].accuracy
+        typer.echo(f"== map: {name}" + (f" (accuracy {acc})" if acc else ""))
+        typer.echo(m.text())
+        totals.append({"map": name, "seeds": seed_list, "vary": vary, **m.totals()})
+        wrong += m.wrong
+    if json_out is not None:
+        json_out.write_text(json.dumps(totals, indent=1))
+    if wrong:
         raise typer.Exit(1)

@@ -220,7 +220,8 @@ def train_figures(log, tl, alert_limit_m: float) -> tuple[dict, dict]:
     # track identity
     track = np.array(tl.track, dtype=object)
     confirmed = np.array(tl.confirmed, bool)
-    right = has_pos & (track == tl.truth_track)
+    truth_track = np.array(tl.truth_edge, dtype=object) if tl.truth_edge else tl.truth_track  # layout: per epoch
+    right = has_pos & (track == truth_track)
     off_map = has_pos & (track == "")
     wrong = has_pos & ~right & ~off_map
     # correction age
@@ -480,5 +481,5 @@ def write_epochs_csv(log, path: str | Path) -> None:
                 w.writerow([tid, f"{s['t'][i]:.1f}", Status(int(s["status"][i])).name.lower(), tl.n_tracked[i],
                             tl.base_sats[i], tl.vrs_master[i], num(s["age"][i], 2), num(s["enu"][i, 0]), num(s["enu"][i, 1]),
                             num(s["enu"][i, 2]), num(s["h"][i]), num(s["v"][i]), num(s["along"][i]),
-                            num(s["cross"][i]), num(s["hpl"][i]), num(s["vpl"][i]), tl.track[i], tl.truth_track,
+                            num(s["cross"][i]), num(s["hpl"][i]), num(s["vpl"][i]), tl.track[i], tl.truth_edge[i] if tl.truth_edge else tl.truth_track,
                             int(tl.confirmed[i]), tl.message[i]])

@@ -59,6 +59,7 @@ from augnet.onboard.unit import OnboardUnit
 from augnet.scenario.latency import LatencyModel
 from augnet.scenario.observations import RoverObservations, StationObservations
 from augnet.scenario.truth import TruthIndex
+from augnet.track.topology import Topology
 from ntrip_caster.gga import parse_gga
 from ntrip_caster.reposition import RepositionPolicy
 from stations import constellation as const
@@ -167,6 +168,9 @@ class WarmUpWorld(World):
             r.cutting_deg = later(r.cutting_deg)
             r.heading_rad = later(r.heading_rad)
             r.outage = later(r.outage, True)  # switched off until time 0
+            if r.edge is not None:  # a layout route: the train stands at its start during the warm-up
+                r.edge = later(r.edge)
+                r.route_m = later(r.route_m)
         return out
 
 
@@ -216,6 +220,8 @@ class TrainLog:
     message: list[str] = field(default_factory=list)
     truth_position: list[np.ndarray] = field(default_factory=list)  # truth, ECEF
     truth_km: list[float] = field(default_factory=list)  # truth chainage of the antenna
+    truth_edge: list[str] = field(default_factory=list)  # layout scenarios: the true edge of each epoch
+    truth_route_m: list[float] = field(default_factory=list)  # layout scenarios: distance along the route [m]
     events: list[BaliseEvent] = field(default_factory=list)
     # along-track fusion of the GNSS fixes with the odometer, per method (augnet.onboard.along_track_fusion)
     fused: dict[str, list[FusedPosition]] = field(default_factory=dict)
@@ -310,7 +316,13 @@ class Chain:
                              if r.kind == "station" and r.id.startswith(CHECK_POINT_PREFIX)}
         # correction_bound: the VRS carry the centre's 4001 bound, which the trains take into their PLs (0281)
         self.engine = CentreEngine(self.stations, world.t0, network_name=sc.name, correction_bound=correction_bound)
-        self.track_db = TrackDatabase.from_dict(track_database(sc)) if sc.line is not None else None
+        self.track_db = None
+        if world.layout is not None:
+            # the as-built layout exported from the simulator's truth (as track_database does for a line)
+            self.track_db = TrackDatabase.from_dict(
+                Topology.from_dict(world.layout.truth_topology_dict()).to_track_database_dict())
+        elif sc.line is not None:
+            self.track_db = TrackDatabase.from_dict(track_database(sc))
         self.trains: dict[str, _Train] = {}
         # the simulated odometers (world clock, so an odometer_slide keeps its scenario time); truth kept inside
         trains_rx = [r for r in rx if r.kind == "train"]
@@ -547,7 +559,11 @@ class Chain:
         log.correction_cross_m.append(m.correction_cross_m if m is not None else 0.0)
         log.message.append(sol.message)
         log.truth_position.append(blk.rx_ecef[e, tr.row].copy())
-        log.truth_km.append(float(self.world.receivers[tr.row].km[int(blk.epoch_index[e])]))
+        rx = self.world.receivers[tr.row]
+        log.truth_km.append(float(rx.km[int(blk.epoch_index[e])]))
+        if rx.edge is not None:
+            log.truth_edge.append(str(rx.edge[int(blk.epoch_index[e])]))
+            log.truth_route_m.append(float(rx.route_m[int(blk.epoch_index[e])]))
         self._fuse(tr, t, int(blk.epoch_index[e]), sol, m)
         # GGA upstream: open the VRS session, and let the caster's policy move it
         if sol.status == Status.NONE or t - tr.last_gga_t < GGA_INTERVAL_S:

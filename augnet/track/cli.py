@@ -45,3 +45,29 @@ def campaign(line: Path = typer.Option(..., "--line", help="railML 2.x file or a
         json_out.write_text(json.dumps(rep.totals(), indent=1))
     if rep.totals()["wrong"]:
         raise typer.Exit(1)
+
+
+@app.command("build-map")
+def build_map_cmd(layout: Path = typer.Option(..., "--layout", help="layout description (augnet-topology/1 or railML)"),
+                  survey: Path = typer.Option(..., "--survey", help="survey record (augnet-survey/1) to build from"),
+                  verify_with: Path = typer.Option(..., "--verify", help="an independent survey record to verify"),
+                  out: Path = typer.Option(..., "--out", help="the built map (augnet-topology/1, with its accuracy)")) -> None:
+    """A track map from a survey run: topology from the layout, geometry fitted to the survey, verified."""
+    from augnet.track.survey_map import build_map, verify
+    from augnet.track.topology_file import save_topology
+
+    try:
+        desc = _load(layout)
+        built = build_map(desc, json.loads(survey.read_text()))
+        acc = verify(built, json.loads(verify_with.read_text()))
+    except (OSError, ValueError) as exc:
+        typer.echo(f"cannot build the map: {exc}", err=True)
+        raise typer.Exit(2)
+    save_topology(built.topology, out)
+    for f in built.fits.values():
+        gaps = ", ".join(f"{a:.0f}-{b:.0f} m" for a, b in f.gaps_m)
+        typer.echo(f"{f.edge:>8}: {f.points} points, {f.outliers} outliers, {f.vertices} vertices, "
+                   f"rms {100 * f.rms_h_m:.2f} cm{', gaps ' + gaps if gaps else ''}")
+    typer.echo(f"verified against {acc['verified_against']}: 95 % {100 * acc['horizontal_95_m']:.1f} cm, "
+               f"max {100 * acc['horizontal_max_m']:.1f} cm ({acc['points']} points, {acc['outliers_dropped']} "
+               f"outliers dropped) -> {out}")

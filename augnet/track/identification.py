@@ -47,6 +47,9 @@ PRUNE_POSTERIOR = 1e-20
 # Edges within this radius [m] of the first fix are the candidates of a cold start (trackmap.py's
 # candidate radius: parallel tracks are 4.5-5 m apart).
 COLD_START_RADIUS_M = 25.0
+# A map's verified accuracy (Topology.accuracy, augnet.track.survey_map.verify) is the 95 % of a one-sided
+# perpendicular distance: sigma = figure / 1.96 (Gaussian), added to every fix's variance across the edge.
+MAP_ACCURACY_95_SIGMAS = 1.96
 # Sigma floor [m]: no fix is better than the map's own centimetre (GEOMETRY_GAP_TOLERANCE is 0.5 m;
 # a survey-grade centre line ~1 cm).
 MIN_SIGMA_M = 0.01
@@ -133,6 +136,9 @@ class TrackIdentifier:
         # gate on the normalised offset: a fix beyond its PL from every candidate is inconsistent
         self.gate_sigma = allocation.k_fault_free
         self.transitions = transitions
+        # the map's own error widens every likelihood (a survey-built map carries its figure; else 0)
+        acc = (topology.accuracy or {}).get("horizontal_95_m")
+        self.map_sigma_m = float(acc) / MAP_ACCURACY_95_SIGMAS if acc is not None and math.isfinite(acc) else 0.0
         self._cands: dict[str, _Candidate] = {}
         self._last_time: float | None = None
 
@@ -186,7 +192,7 @@ class TrackIdentifier:
             dist = float(np.hypot(o[0], o[1]))
             if dist > 0.0:
                 u = o / dist
-                var = float(u @ fix.cov_en_m2 @ u)
+                var = float(u @ fix.cov_en_m2 @ u) + self.map_sigma_m ** 2
                 d2 = dist * dist / var
             else:
                 d2 = 0.0

@@ -137,8 +137,11 @@ class Topology:
     """A validated track topology.  Construction validates; a bad element raises `TopologyError`."""
 
     def __init__(self, name: str, nodes: Iterable[Node], edges: Iterable[Edge], turnouts: Iterable[Turnout] = (),
-                 points: Iterable[PointOfInterest] = (), sections: Iterable[SectionBoundary] = ()):
+                 points: Iterable[PointOfInterest] = (), sections: Iterable[SectionBoundary] = (),
+                 accuracy: dict | None = None):
         self.name = name
+        # a map built from a survey carries its verified accuracy (augnet.track.survey_map.verify), else None
+        self.accuracy = dict(accuracy) if accuracy is not None else None
         self.nodes = _unique("node", nodes)
         self.edges = _unique("edge", edges)
         self.turnouts = _unique("turnout", turnouts)
@@ -422,6 +425,7 @@ class Topology:
                                    for p in self.points.values()],
             "section_boundaries": [{"id": s.id, "edge": s.edge, "km": s.km, "name": s.name}
                                    for s in self.sections.values()],
+            **({"accuracy": self.accuracy} if self.accuracy is not None else {}),
         }
 
     @classmethod
@@ -465,7 +469,10 @@ class Topology:
             raise TopologyError(el, f"missing field {exc}") from None
         except (TypeError, ValueError, AttributeError) as exc:
             raise TopologyError(el, f"malformed: {exc}") from None
-        return cls(str(d.get("name", "")), nodes, edges, turnouts, points, sections)
+        acc = d.get("accuracy")
+        if acc is not None and not isinstance(acc, dict):
+            raise TopologyError("accuracy", "must be an object")
+        return cls(str(d.get("name", "")), nodes, edges, turnouts, points, sections, acc)
 
     def to_geojson(self) -> dict[str, Any]:
         """RFC 7946 FeatureCollection: tracks (LineString), switches, points of interest, section

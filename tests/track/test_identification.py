@@ -199,3 +199,21 @@ def test_campaign_error_model_reports_its_sigma_honestly_unless_stressed(scale):
     assert 0.6 < states.count("fixed") / len(states) < 0.9  # the stated fixed/float mixture
     with pytest.raises(ValueError):
         SolutionErrorModel(np.random.default_rng(0), error_scale=0.0)
+
+
+def test_a_maps_stated_accuracy_widens_the_likelihood(topo):
+    """A fix 0.7 m off track 1 far from any switch: beyond the fixed solution's PL (0.57 m) on an exact map
+    (inconsistent), within it on a map whose verified accuracy is 0.4 m (95 %)."""
+    from augnet.track.topology import Topology
+
+    d = topo.to_dict()
+    coarse = Topology.from_dict({**d, "accuracy": {"horizontal_95_m": 0.4}})
+    out = {}
+    for name, t in (("exact", topo), ("coarse", coarse)):
+        ident = TrackIdentifier(t)
+        ident.start("t1b", 5.0, 0.0)
+        along = t.along_m("t1b", 5.0)
+        out[name] = ident.update(fix_at(t, "t1b", along + 10.0, 1.0, offset_en=(0.0, -0.7)))
+    assert out["exact"].status == "inconsistent"
+    assert out["coarse"].status != "inconsistent" and out["coarse"].best_track == "1"
+    assert TrackIdentifier(coarse).map_sigma_m == pytest.approx(0.4 / 1.96)

@@ -169,3 +169,20 @@ def test_repeated_point_is_refused(d):
     edge["km"].insert(1, edge["km"][0] + 1e-4)
     e = refused(d)
     assert e.element == "edge t1b" and "points 0 and 1 coincide" in e.reason
+
+
+def test_adapter_matches_the_edge_under_the_train_not_a_collinear_one_ahead(topo):
+    """One track per edge: collinear edges (t1a.0 ... t1c.2 on track 1) lie on each other's straight
+    extension; a roof antenna 5 cm off the centre line is ~5 cm from every one of them across the track but
+    kilometres along it: only the edge under the train is a candidate."""
+    from augnet.gnss.geometry import ecef_to_geodetic, enu_rotation
+
+    db = TrackDatabase.from_dict(topo.to_track_database_dict())
+    for e in topo.edges.values():
+        for km in np.linspace(e.km_begin, e.km_end, 7)[1:-1]:
+            p = topo.position_ecef(e.id, km)
+            llh = ecef_to_geodetic(p)
+            r = enu_rotation(llh[0], llh[1])
+            for north in (-0.05, 0.05):
+                m = db.match(p + r.T @ np.array([0.0, north, 4.2]))
+                assert m.track == e.id, (e.id, km, north, m.track, m.candidates)
