@@ -38,6 +38,10 @@ SHARES = (0.5, 0.8)  # fixed share of the fixable satellites for the cold-start 
 
 MODEL_CHECK_EVERY_S = 10
 LOW_DEG = 20.0  # "low": the satellites the model is for, 15-20 degrees at the lower station
+# An arc that starts within this of the same satellite's last epoch, or at a slip, is the satellite back after a
+# receiver event (gap, slip, phase reset: decision 0272), not a rising one: the statistics call a gap of up to
+# 15 min a gap, a longer one a new pass (PASS_GAP_MAX_S, stations/observation_statistics.py).
+BACK_MAX_GAP_S = 900
 
 
 def _rms(v) -> float:
@@ -87,8 +91,9 @@ class _Timing:
             if arc is None or arc["last"] != epoch - 1 or s in res.slips:
                 if arc is not None:
                     self.closed.append(arc)
+                back = arc is not None and epoch - arc["last"] <= BACK_MAX_GAP_S
                 arc = self.open[key] = dict(start=epoch, cold=epoch == self.t0, eligible=None, fixed=None,
-                                            was_ref=False, last=epoch)
+                                            was_ref=False, last=epoch, back=back)
             arc["last"] = epoch
             arc["was_ref"] |= bool(ref[k] and arc["fixed"] is None)
             if res.eligible[k] and arc["eligible"] is None:
@@ -96,10 +101,11 @@ class _Timing:
             if fixed[k] and arc["fixed"] is None:
                 arc["fixed"] = epoch
 
-    def new_arcs(self):
-        """(times to fix of the new arcs, number censored)."""
+    def new_arcs(self, back: bool = False):
+        """(times to fix of the new arcs, number censored): of the rising satellites, or (`back`) of those back
+        after a gap or a slip."""
         arcs = [a for a in self.closed + list(self.open.values())
-                if not a["cold"] and a["eligible"] is not None and not a["was_ref"]]
+                if not a["cold"] and a["eligible"] is not None and not a["was_ref"] and a["back"] == back]
         ttf = [a["fixed"] - a["eligible"] for a in arcs if a["fixed"] is not None]
         return np.array(ttf, float), sum(a["fixed"] is None for a in arcs)
 
@@ -146,7 +152,9 @@ def hour():
     cold = {key: np.array([rec.get(key, np.inf) for tm in timing.values() for rec in tm.first.values()], float)
             for key in ("first",) + SHARES}
     ttf, censored = timing[0].new_arcs()
+    back_ttf, back_censored = timing[0].new_arcs(back=True)
     out = dict(checked=checked, wrong=wrong, cold=cold, arc_ttf=ttf, arc_censored=censored,
+               back_ttf=back_ttf, back_censored=back_censored,
                fraction_after_10_min={k: float(np.mean(v[600:])) for k, v in fractions.items()},
                model=np.array(model))
 
@@ -158,7 +166,10 @@ def hour():
           f"first fix median {med(cold['first'])} (max {cold['first'].max():.0f} s), half of the fixable "
           f"satellites median {med(cold[0.5])}, 80 % median {med(cold[0.8])} ({np.isfinite(cold[0.8]).sum()} "
           f"reached). New arcs: {len(ttf)} fixed, time from eligible to fixed median "
-          f"{med(ttf) if len(ttf) else '-'}, {censored} censored. Mean fixed fraction after 10 min: "
+          f"{med(ttf) if len(ttf) else '-'}, {censored} censored. Arcs back after a gap or slip: {len(back_ttf)} "
+          f"fixed, median {med(back_ttf) if len(back_ttf) else '-'}, 90 % "
+          f"{np.percentile(back_ttf, 90) if len(back_ttf) else float('nan'):.0f} s, {back_censored} censored. "
+          f"Mean fixed fraction after 10 min: "
           + ", ".join(f"{k} {v:.2f}" for k, v in out["fraction_after_10_min"].items()))
     low = out["model"][(out["model"][:, 0] < LOW_DEG)]
     print(f"Ionosphere model, satellites not yet fixed at 15-{LOW_DEG:.0f} degrees ({len(low)}): truth DD ionosphere "
