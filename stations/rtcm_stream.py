@@ -70,6 +70,17 @@ class RtcmStreams:
         # per receiver: whole cycles taken off each (satellite, signal)'s phase, and when it last changed [GPST s]
         self._phase_off = {rx.id: None for rx in world.receivers}
         self._realigned_t = {rx.id: None for rx in world.receivers}
+        self._block_off: dict[str, np.ndarray] = {}  # the last block's offsets per epoch (E, N, K)
+
+    def sent_ambiguity(self, blk: EpochBlock) -> np.ndarray:
+        """The truth ambiguities (E, R, N, K) [cycles] of the phases as the stream carried them (the MSM
+        re-alignment's whole cycles taken off): for the block just added."""
+        amb = blk.ambiguity_cyc.copy()
+        for i, rx in enumerate(self.world.receivers):
+            off = self._block_off.get(rx.id)
+            if off is not None:
+                amb[:, i] -= off
+        return amb
 
     def _fitted_phase(self, blk: EpochBlock, i: int) -> tuple[np.ndarray, np.ndarray]:
         """Receiver i's phases [cycles] and lock times [s] (E, N, K) as its MSM carries them: a phase that drifts
@@ -81,6 +92,7 @@ class RtcmStreams:
         lam = self.world.wavelength_m
         off = self._phase_off[rid] if self._phase_off[rid] is not None else np.zeros(ph.shape[1:])
         t_re = self._realigned_t[rid] if self._realigned_t[rid] is not None else np.full(ph.shape[1:], -np.inf)
+        offs = np.zeros(ph.shape)
         for e in range(len(blk.t_gpst)):
             with np.errstate(invalid="ignore"):
                 d = (ph[e] - off) - pr[e] / lam  # [cycles]
@@ -89,8 +101,10 @@ class RtcmStreams:
                 off = np.where(out, off + np.rint(d), off)
                 t_re = np.where(out, blk.t_gpst[e], t_re)
             ph[e] -= off
+            offs[e] = off
             lock[e] = np.minimum(lock[e], blk.t_gpst[e] - t_re)
         self._phase_off[rid], self._realigned_t[rid] = off, t_re
+        self._block_off[rid] = offs
         return ph, lock
 
     def _eph_frame(self, row: int) -> bytes:
