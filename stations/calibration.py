@@ -41,6 +41,7 @@ class PresetRun:
 
 PRESET_RUNS = (
     PresetRun("baseline-10km", "baseline-10km", None, ("A", "B"), (("A", "B"),)),
+    PresetRun("demo", "demo", None, ("STA1", "STA2", "STA3", "OFF1"), (("STA1", "STA2"), ("STA2", "STA3"))),
     PresetRun("network-70km quiet", "network-70km", "quiet", ("NORTH", "SOUTH", "check1"),
               (("NORTH", "SOUTH"), ("NORTH", "check1"))),
     PresetRun("network-70km moderate", "network-70km", "moderate", ("NORTH", "SOUTH", "check1"),
@@ -49,6 +50,20 @@ PRESET_RUNS = (
     PresetRun("catnet-like", "catnet-like", None, ("CREU", "EBRE", "GARR", "UPC1"),
               (("GARR", "EBRE"), ("GARR", "CREU"), ("CREU", "EBRE"), ("GARR", "UPC1"))),
 )
+
+
+# The presets that ship as the product's scenarios (catnet-like is the calibration's own): each must be at least as
+# harsh as the real network on every statistic (decision 0272).
+SHIPPED_PRESETS = ("baseline-10km", "demo", "iono-storm", "network-70km")
+
+
+def shipped_runs() -> list[PresetRun]:
+    """The calibration runs of the shipped presets, each at its own ionosphere level."""
+    return [r for r in PRESET_RUNS if r.scenario in SHIPPED_PRESETS and r.level in (None, _own_level(r.scenario))]
+
+
+def _own_level(scenario: str) -> str:
+    return load_scenario(scenario).errors.ionosphere.level
 
 
 def record_run(run: PresetRun, rate_hz: float, duration_s: float, out_dir: Path) -> Path:

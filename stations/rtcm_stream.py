@@ -29,6 +29,11 @@ ANTENNA_DESCRIPTOR = "AUGNET-ISOTROPIC"
 RECEIVER_DESCRIPTOR = "AUGNET SIMULATOR"
 FIRMWARE = "1"
 SYSTEM_ORDER = ("G", "E", "C")
+# MSM carries the phase range within +-1171 m (2^-8 ms) of the rough range, itself within 146 m (2^-11 ms) of the
+# pseudorange (RTCM 10403.3 DF397, DF405): a phase further than this from its own pseudorange (after an unflagged
+# phase reset of kilometres, decision 0272) is re-aligned to it by whole cycles and its lock time restarts, as a
+# receiver streaming MSM must (augnet.gnss.rtcm.observables.phase_offset_cycles); else it goes out as invalid.
+MSM_PHASE_FIT_M = 1000.0
 
 
 def arp_message(station_id: int, ecef_m) -> RtcmMessage:
@@ -63,6 +68,45 @@ class RtcmStreams:
         self._sat_cols = {s: np.flatnonzero(world.sat_system == s) for s in self.systems}
         self._prn = np.array([int(s[1:]) for s in world.sats])
         self._sig_ids = {s: np.array([by_rinex(s, c).msm_id for c in sc.signals[s]]) for s in self.systems}
+        # per receiver: whole cycles taken off each (satellite, signal)'s phase, and when it last changed [GPST s]
+        self._phase_off = {rx.id: None for rx in world.receivers}
+        self._realigned_t = {rx.id: None for rx in world.receivers}
+        self._block_off: dict[str, np.ndarray] = {}  # the last block's offsets per epoch (E, N, K)
+
+    def sent_ambiguity(self, blk: EpochBlock) -> np.ndarray:
+        """The truth ambiguities (E, R, N, K) [cycles] of the phases as the stream carried them (the MSM
+        re-alignment's whole cycles taken off): for the block just added."""
+        amb = blk.ambiguity_cyc.copy()
+        for i, rx in enumerate(self.world.receivers):
+            off = self._block_off.get(rx.id)
+            if off is not None:
+                amb[:, i] -= off
+        return amb
+
+    def _fitted_phase(self, blk: EpochBlock, i: int) -> tuple[np.ndarray, np.ndarray]:
+        """Receiver i's phases [cycles] and lock times [s] (E, N, K) as its MSM carries them: a phase that drifts
+        more than MSM_PHASE_FIT_M from its pseudorange is re-aligned by whole cycles, its lock time restarting."""
+        rid = self.world.receivers[i].id
+        ph = blk.phase_cyc[:, i].copy()
+        lock = blk.lock_time_s[:, i].copy()
+        pr = blk.pseudorange_m[:, i]
+        lam = self.world.wavelength_m
+        off = self._phase_off[rid] if self._phase_off[rid] is not None else np.zeros(ph.shape[1:])
+        t_re = self._realigned_t[rid] if self._realigned_t[rid] is not None else np.full(ph.shape[1:], -np.inf)
+        offs = np.zeros(ph.shape)
+        for e in range(len(blk.t_gpst)):
+            with np.errstate(invalid="ignore"):
+                d = (ph[e] - off) - pr[e] / lam  # [cycles]
+                out = np.abs(d * lam) > MSM_PHASE_FIT_M  # False where NaN
+            if out.any():
+                off = np.where(out, off + np.rint(d), off)
+                t_re = np.where(out, blk.t_gpst[e], t_re)
+            ph[e] -= off
+            offs[e] = off
+            lock[e] = np.minimum(lock[e], blk.t_gpst[e] - t_re)
+        self._phase_off[rid], self._realigned_t[rid] = off, t_re
+        self._block_off[rid] = offs
+        return ph, lock
 
     def _eph_frame(self, row: int) -> bytes:
         fr = self._eph_frames.get(row)
@@ -119,6 +163,7 @@ class RtcmStreams:
         for s in self.systems:
             last = np.where(present[s], s, last)
         out: dict[str, dict[int, bytes]] = {}
+        phase_all, lock_all = self._fitted_phase(blk, i)
         for s in self.systems:
             cols = self._sat_cols[s]
             K = len(sc.signals[s])
@@ -129,10 +174,10 @@ class RtcmStreams:
                     continue
                 pr = blk.pseudorange_m[ep][:, i][:, cols, :K]
                 cells = (~np.isnan(pr)).sum(axis=(1, 2))
-                ph = blk.phase_cyc[ep][:, i][:, cols, :K]
+                ph = phase_all[ep][:, cols, :K]
                 dop = blk.doppler_hz[ep][:, i][:, cols, :K]
                 cnr = blk.cnr_dbhz[ep][:, i][:, cols, :K]
-                lock = blk.lock_time_s[ep][:, i][:, cols, :K] * 1000.0
+                lock = lock_all[ep][:, cols, :K] * 1000.0
                 half = (blk.lli[ep][:, i][:, cols, :K] & 2) != 0
                 epochs = np.array([msm_epoch_ms(s, float(t)) for t in blk.t_gpst[ep]])
                 small = cells <= MSM_MAX_CELLS

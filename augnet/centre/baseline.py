@@ -195,7 +195,8 @@ class BaselineSolver:
                 self.ambiguities.forget(s)
                 self.ionosphere.activity.forget(s)
                 add_satellite(self.state, self.block, s, self.ionosphere.state_prior_m2(s, mapping[k]), n0[k, 0],
-                              n0[k, 1], amb_var, mp_code_var[k], mp_phase_var[k])
+                              n0[k, 1], amb_var, mp_code_var[k], mp_phase_var[k],
+                              mp_code_var[k] * self.cfg.code_sigma_second_factor**2)
             elif s in slips.slipped:
                 self._restart(s, n0[k, 0], n0[k, 1])
         seen = set(sd.sats.tolist())
@@ -226,15 +227,17 @@ class BaselineSolver:
         x = self.state.x
         decay = np.ones(len(x))
         innovation = []
-        for off, tau, var in ((self.block.code_multipath, cfg.code_multipath_tau_s, mp_code_var),
-                              (self.block.phase_multipath, cfg.phase_multipath_tau_s, mp_phase_var)):
+        f2 = cfg.code_sigma_second_factor**2
+        for off, tau, var, var2 in (
+                (self.block.code_multipath, cfg.code_multipath_tau_s, mp_code_var, mp_code_var * f2),
+                (self.block.phase_multipath, cfg.phase_multipath_tau_s, mp_phase_var, mp_phase_var)):
             if off is None:
                 continue
             phi = math.exp(-dt / tau)
             mp = np.concatenate([slots + off, slots + off + 1])
             x[mp] *= phi
             decay[mp] = phi
-            innovation.append((mp, (1.0 - phi**2) * np.concatenate([var, var])))
+            innovation.append((mp, (1.0 - phi**2) * np.concatenate([var, var2])))
         P *= decay[:, None] * decay[None, :]
         for mp, q in innovation:
             P[mp, mp] += q
@@ -275,7 +278,7 @@ class BaselineSolver:
                 vals[sl, j] = v
             obs = sd.phase_m[:, fq] if kind == "L" else sd.code_m[:, fq]
             z[sl] = obs[rows] - obs[ref_k[rows]]
-            var = var_phase_sd if kind == "L" else var_code_sd
+            var = var_phase_sd if kind == "L" else var_code_sd * (cfg.code_sigma_second_factor**2 if fq else 1.0)
             R[sl, sl] = np.diag(var[rows]) + np.where(same_ref, var[ref_k[rows]][:, None], 0.0)
         return cols, vals, z, R
 

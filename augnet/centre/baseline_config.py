@@ -31,6 +31,10 @@ class BaselineConfig:
         0.21, unit="m", doc="undifferenced code sigma s, as for the phase; 0.3 m at zenith",
         source=f"RTKLIB a = b weighting; geodetic station figures, {_NRTK}")
     code_correlation_inflation: float = setting(1.0, doc="scales the whole code sigma (white and multipath)")
+    code_sigma_second_factor: float = setting(
+        1.0, doc="the second frequency's code sigma (white and multipath) relative to the first's; real L2 P(Y) "
+        "code is 1.3-2.0 times noisier than L1 C/A above 20 deg (catnet MP2/MP1)",
+        source="docs/simulator-calibration.md; decision 0272")
     code_multipath_share: float = setting(
         0.5, doc="share of the code variance carried as first-order Gauss-Markov multipath states (SD per "
         "satellite and frequency) instead of white noise; 0: white noise only",

@@ -50,15 +50,19 @@ def new_state(cfg: BaselineConfig) -> StateLayout:
 
 
 def add_satellite(state: StateLayout, block: SatelliteBlock, sat: str, iono_var_m2: float, n1: float, n2: float,
-                  amb_var_cyc2: float, code_mp_var_m2: float, phase_mp_var_m2: float) -> None:
-    """A satellite's block: the ionosphere at zero, the ambiguities from phase minus code, no multipath yet."""
+                  amb_var_cyc2: float, code_mp_var_m2: float, phase_mp_var_m2: float,
+                  code_mp_var2_m2: float | None = None) -> None:
+    """A satellite's block: the ionosphere at zero, the ambiguities from phase minus code, no multipath yet
+    (`code_mp_var2_m2`: the second frequency's code multipath variance, default the first's)."""
     values = np.zeros(block.size)
     values[IONO], values[N1], values[N1 + 1] = 0.0, n1, n2
     variances = np.zeros(block.size)
     variances[IONO], variances[N1], variances[N1 + 1] = iono_var_m2, amb_var_cyc2, amb_var_cyc2
-    for off, var in ((block.code_multipath, code_mp_var_m2), (block.phase_multipath, phase_mp_var_m2)):
+    code2 = code_mp_var_m2 if code_mp_var2_m2 is None else code_mp_var2_m2
+    for off, var, var2 in ((block.code_multipath, code_mp_var_m2, code2),
+                           (block.phase_multipath, phase_mp_var_m2, phase_mp_var_m2)):
         if off is not None:
-            variances[off] = variances[off + 1] = var
+            variances[off], variances[off + 1] = var, var2
     state.add(sat, values, variances)
 
 

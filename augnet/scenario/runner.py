@@ -371,6 +371,8 @@ class Chain:
 
     def add_block(self, blk: EpochBlock, on_epoch: Callable[[], None] | None = None) -> None:
         self.streams.add(blk)
+        # the truth of the phases as streamed: MSM re-aligns a phase reset by kilometres (stations/rtcm_stream.py)
+        truth_blk = dataclasses.replace(blk, ambiguity_cyc=self.streams.sent_ambiguity(blk))
         station_bytes = {}
         for name in self.station_names:
             station_bytes[name] = dict(self.streams.epoch_bytes[name])
@@ -380,7 +382,7 @@ class Chain:
             self.streams.buffers[name] = bytearray()  # the runner does not write .rtcm3 files
         for e in range(len(blk.t_gpst)):
             t = float(blk.t_gpst[e])
-            self._truth_epochs[round(t, 3)] = (blk, e)
+            self._truth_epochs[round(t, 3)] = (truth_blk, e)
             while len(self._truth_epochs) > TRUTH_EPOCHS_KEPT:
                 self._truth_epochs.pop(next(iter(self._truth_epochs)))
             # stations -> centre

@@ -14,14 +14,22 @@ def station_epochs(world, block, r: int) -> list[StationEpoch]:
     return [station_epoch(world, block, e, r) for e in range(len(block.t_gpst))]
 
 
-def recorded_streams(duration_s: float, scenario: str = "network-70km"):
+def recorded_streams(duration_s: float, scenario: str = "network-70km", errors: dict | None = None):
     """A scenario's stations as the RTCM bytes they would stream, every epoch kept: (world, streams, reference
-    station coordinates by id; check receivers left out)."""
+    station coordinates by id; check receivers left out). `errors` overrides fields of the scenario's errors
+    (a nested dict for `noise`), e.g. the golden probes' receiver model."""
     from stations.rtcm_stream import RtcmStreams
     from stations.scenario import load_scenario
     from stations.world import World
 
-    world = World(load_scenario(scenario).model_copy(update={"duration_s": duration_s}))
+    sc = load_scenario(scenario)
+    update: dict = {"duration_s": duration_s}
+    if errors:
+        err = dict(errors)
+        if "noise" in err:
+            err["noise"] = sc.errors.noise.model_copy(update=err["noise"])
+        update["errors"] = sc.errors.model_copy(update=err)
+    world = World(sc.model_copy(update=update))
     streams = RtcmStreams(world)
     streams.keep_epochs = True
     for blk in world.epochs():

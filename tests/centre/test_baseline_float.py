@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from augnet.centre.baseline_config import BaselineConfig
 from augnet.centre.baseline_state import N1
 from augnet.centre.network import NetworkSolver
 from stations.scenario import load_scenario
@@ -19,12 +20,11 @@ pytestmark = pytest.mark.slow
 DURATION_S = 240
 
 
-@pytest.fixture(scope="module")
-def normalized_errors():
+def _normalized_errors(config: BaselineConfig | None) -> np.ndarray:
     world = World(load_scenario("network-70km").model_copy(update={"duration_s": DURATION_S}))
     ids = world.receiver_ids
     stations = {r.id: r.ecef[0] for r in world.receivers if not r.id.startswith("check")}
-    net = NetworkSolver(stations)
+    net = NetworkSolver(stations, config=config)
     z = []
     for blk in world.epochs():
         per = {r: station_epochs(world, blk, i) for i, r in enumerate(ids)}
@@ -48,11 +48,28 @@ def normalized_errors():
     return np.array(z)
 
 
-def test_float_wide_lane_errors_match_the_covariance(normalized_errors):
-    z = normalized_errors
-    assert z.size > 500  # every 10th epoch's unfixed satellites: 934 since the network fixes faster (was ~1,300)
+@pytest.fixture(scope="module")
+def normalized_errors():
+    """The filter told the world's L2 code noise (the preset's second_signal_code_factor)."""
+    factor = load_scenario("network-70km").errors.noise.second_signal_code_factor
+    return _normalized_errors(BaselineConfig(code_sigma_second_factor=factor))
+
+
+def _check(z):
+    assert z.size > 500  # every 10th epoch's unfixed satellites: 820 in the harsher preset (decision 0272)
     rms = float(np.sqrt(np.mean(z**2)))
     print(f"\nfloat DD wide lanes (unfixed, eligible), {z.size} samples: error / sigma RMS {rms:.2f}, "
           f"|z| > 3: {np.mean(np.abs(z) > 3):.2%}")
-    assert 0.4 <= rms <= 1.4  # measured 0.60: on the safe side (the quiet-day ionosphere prior is wide)
+    assert 0.4 <= rms <= 1.4  # measured 0.65 (0.60 before 0272): on the safe side (the ionosphere prior is wide)
     assert np.mean(np.abs(z) > 3) < 0.01
+
+
+def test_float_wide_lane_errors_match_the_covariance(normalized_errors):
+    _check(normalized_errors)
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
+    "the default filter weights L2 code as L1 code; the preset's L2 code is 1.5 times noisier (as real L2 P(Y)): "
+    "1.6 % of |z| > 3, decision 0272"))
+def test_float_wide_lane_errors_match_the_covariance_with_the_default_code_weights():
+    _check(_normalized_errors(None))

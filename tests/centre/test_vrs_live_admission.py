@@ -183,7 +183,8 @@ def test_live_and_augnet_vrs_make_the_same_admission_decisions(sim, live_on, tmp
     epoch. End to end, the same simulation recorded as RINEX through `augnet vrs` and streamed as RTCM through
     the live engine (serving each epoch from its own network epoch, as `augnet vrs` does): the network's inputs
     differ by their rounding (RINEX 1 mm / 0.001 cycle, MSM7 finer), which moves a satellite's first corrected
-    epoch by one epoch now and then; nothing else differs: the same moments to the epoch's shift, the same sets."""
+    epoch by one epoch now and then (by a few with the presets' receiver events); nothing else differs: the same
+    moments to the epoch's shift, the same sets."""
     from stations.record import record
     from stations.scenario import load_scenario
 
@@ -204,10 +205,18 @@ def test_live_and_augnet_vrs_make_the_same_admission_decisions(sim, live_on, tmp
         post[round(ep.t_gpst - live["t0"])] = (carried, mode == "network" and bool((ep.lli & 1).all()), corrected)
     ours = {round(t - live["t0"]): (c, m, k) for t, c, m, k in live["decisions"]}
     common = set(ours) & set(post)
-    for t in sorted(common):  # a corrected-set difference is one epoch's shift of a satellite's entry or exit
-        for sat in ours[t][2] ^ post[t][2]:
-            assert any(t + dt in common and (sat in ours[t + dt][2]) == (sat in post[t + dt][2])
-                       for dt in (-1, 1)), (t, sat)
+    # a corrected-set difference is a shift of a satellite's entry or exit: one epoch in a world without
+    # unannounced receiver events; with the presets' (decision 0272) the network restarts satellites now and then
+    # and a fix decision near its thresholds can move by several epochs (measured: up to 8), never by as long as
+    # the admission's settling time, so the moments stay the same (below)
+    run: dict[str, int] = {}
+    longest = 0
+    for t in sorted(common):
+        differ = ours[t][2] ^ post[t][2]
+        run = {sat: run.get(sat, 0) + 1 for sat in differ}
+        longest = max([longest, *run.values()])
+    print(f"\nlongest corrected-set difference: {longest} epochs")
+    assert longest < CFG.settle_s  # 1 Hz: epochs = seconds
     live_moments = sorted(t for t, (_, m, _) in ours.items() if m)
     post_moments = sorted(t for t, (_, m, _) in post.items() if m)
     assert len(live_moments) == len(post_moments) == res.admission_moments >= 2

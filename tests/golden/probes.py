@@ -16,11 +16,18 @@ import numpy as np
 # --- simulated stations (the stations package is the test fixture, not code under restructure) ---------
 
 
+# The receiver model the golden files were recorded with: the presets' unannounced receiver events and L2 code
+# factor (decision 0272) left out, so that a preset made harsher leaves the recorded golden inputs byte-identical.
+GOLDEN_RECEIVER = {"phase_resets_per_hour": 0.0, "unflagged_slips_per_hour": 0.0, "data_gaps_per_hour": 0.0,
+                   "noise": {"second_signal_code_factor": 1.0}}
+
+
 def simulated_streams(duration_s: int, scenario: str = "network-70km"):
-    """(world, RtcmStreams with every epoch's bytes kept, reference stations by id) of a seeded scenario."""
+    """(world, RtcmStreams with every epoch's bytes kept, reference stations by id) of a seeded scenario, with
+    the golden receiver model."""
     from tests.centre.simdata import recorded_streams
 
-    return recorded_streams(duration_s, scenario)
+    return recorded_streams(duration_s, scenario, errors=GOLDEN_RECEIVER)
 
 
 # --- RTCM encoder and wire primitives ------------------------------------------------------------------

@@ -150,6 +150,25 @@ def test_catnet_like_preset_at_least_as_harsh_as_real(real, tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.shared_data
+@pytest.mark.timeout(LONG_RUN_TIMEOUT_S)
+@pytest.mark.parametrize("label", [r.label for r in cal.shipped_runs()])
+def test_no_shipped_preset_milder_than_real(real, tmp_path, label):
+    """Issue 14: every shipped preset, a day at 30 s, at least as harsh as catnet on all 18 statistics (decision
+    0272: their receiver events and L2 code are catnet-like's)."""
+    run = next(r for r in cal.PRESET_RUNS if r.label == label)
+    folder = cal.record_run(run, cal.RATE_30S_HZ, cal.DAY_S, tmp_path / run.label.replace(" ", "-"))
+    st, pr = cal.measure_recording(folder, run.stations, run.pairs)
+    comps = cal.compare_stations(st, real[0]) + cal.compare_pairs(pr, real[1])
+    assert len(comps) == 18
+    assert not [(c.statistic, c.preset, c.real) for c in comps if c.milder]
+
+
+def test_every_shipped_preset_has_a_calibration_run():
+    assert sorted(r.scenario for r in cal.shipped_runs()) == sorted(cal.SHIPPED_PRESETS)
+
+
+@pytest.mark.slow
 @pytest.mark.timeout(LONG_RUN_TIMEOUT_S)
 def test_network_on_catnet_like_fixes_without_a_wrong_integer():
     """Unflagged resets, slips and gaps at the real network's rates: the centre's detector catches them, the

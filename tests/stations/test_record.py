@@ -134,3 +134,47 @@ def test_recording_reads_back(demo_recording):
     assert sel.sum() == 30
     assert np.all(atmo["tropo_m"] > 2.0) and np.all(atmo["iono_l1_m"] >= 0.0)
     assert load_scenario_json(out)["name"] == "demo"
+
+
+def test_msm_keeps_the_phase_through_a_phase_reset_of_kilometres():
+    """An unflagged phase reset moves the phase up to 5 km from the code (decision 0272); MSM carries phase within
+    1171 m of the rough range, so the station re-aligns it by whole cycles and restarts its lock time, as a real
+    receiver's stream must: no phase is lost, and the sent phase changes by whole cycles only at a lock restart."""
+    from augnet.gnss.rtcm.codec import MessageReader
+    from augnet.gnss.rtcm.msm import MsmMessage
+    from augnet.gnss.rtcm.observables import msm_to_observables
+    from stations.rtcm_stream import RtcmStreams
+    from stations.world import World
+
+    sc = load_scenario("network-70km")
+    errors = sc.errors.model_copy(update=dict(phase_resets_per_hour=60.0))  # ~1 reset per satellite-minute
+    world = World(sc.model_copy(update=dict(duration_s=120.0, errors=errors)))
+    streams = RtcmStreams(world)
+    streams.keep_epochs = True
+    r = world.receiver_ids.index("NORTH")
+    phase, code = [], []
+    for blk in world.epochs():
+        streams.add(blk)
+        phase.append(blk.phase_cyc[:, r])
+        code.append(blk.pseudorange_m[:, r])
+    phase, code = np.concatenate(phase), np.concatenate(code)
+    assert (np.abs(phase * world.wavelength_m - code) > 1171.0).any()  # beyond what MSM carries unaligned
+    col = {s: j for j, s in enumerate(world.sats)}
+    sent, lock = np.full(phase.shape, np.nan), np.full(phase.shape, np.nan)
+    for e, (_, data) in enumerate(streams.epoch_bytes["NORTH"]):
+        for msg in MessageReader().feed(data):
+            if isinstance(msg, MsmMessage):
+                obs = msm_to_observables(msg)
+                for k, prn in enumerate(obs.sat_ids):
+                    j = col[f"{obs.system}{int(prn):02d}"]
+                    for m, sid in enumerate(obs.sig_ids):
+                        kk = int(np.flatnonzero(streams._sig_ids[obs.system] == sid)[0])
+                        sent[e, j, kk] = obs.phase_cycles[k, m]
+                        lock[e, j, kk] = obs.lock_ms[k, m]
+    have = np.isfinite(phase)
+    assert np.isfinite(sent[have]).all()  # every phase went out valid
+    off = phase - sent
+    assert np.nanmax(np.abs(off - np.rint(off))) < 0.01  # whole cycles (MSM7 phase resolution ~0.1 mm)
+    step = np.abs(np.diff(np.rint(off), axis=0)) > 0
+    restarted = np.diff(lock, axis=0) < 0
+    assert step.any() and restarted[step].all()

@@ -294,6 +294,7 @@ def test_doppler_matches_the_phase_rate():
     sc = load_scenario("demo").model_copy(update=dict(duration_s=20.0))
     sc = sc.model_copy(update=dict(errors=sc.errors.model_copy(update=dict(
         noise=sc.errors.noise.model_copy(update={"enabled": False}), cycle_slips_per_hour=0.0,
+        phase_resets_per_hour=0.0, unflagged_slips_per_hour=0.0, data_gaps_per_hour=0.0,  # unflagged jumps
         receiver_clock=False))))
     # (a receiver clock's random-walk frequency would be in the Doppler at the epoch but averaged
     # in the phase difference: 0.1-0.2 Hz for a train TCXO, as in real receivers)
