@@ -46,6 +46,13 @@ def process(rover: ObsArrays, base: ObsArrays, nav: NavigationData, base_positio
                     rover_antenna=rover_antenna)
     if interpolate_base:
         flag_slips([base_epochs[i] for i in order])
+    # the base's past before the rover's first epoch: the quiet-ionosphere rate's base part (decision 0221)
+    t_first = rov_epochs[0].time if rov_epochs else np.inf
+    history = [base_epochs[i] for i in order if base_epochs[i].time < t_first - EPOCH_MATCH_TOLERANCE_S]
+    if not interpolate_base:
+        flag_slips(history)
+    for b in history:
+        flt.observe_base_history(b)
     used_from = -1  # the base epoch whose loss-of-lock flags were last handed on
     for ep in rov_epochs:
         k = int(np.searchsorted(base_times, ep.time + EPOCH_MATCH_TOLERANCE_S, side="right")) - 1
