@@ -929,12 +929,16 @@ class RtkFilter:
 
     def _quiet_applies(self, ep: _CommonEpoch) -> bool:
         """Whether to try the quiet-ionosphere hypothesis this epoch: the ionosphere in the model on the per-km
-        prior of a physical base (the learned level not known yet) and the GF rate saying the night is quiet."""
+        prior of a physical base, the learned level not known yet.  (Its fix is declared only once the GF rate
+        says the night is quiet, `_quiet_rate_ok`; its decisions agree or not whatever the rate.)"""
         opt = self.opt
         return (self.iono_active and opt.iono_prior == "learned" and opt.iono_sigma_m is None
-                and not self.base_is_vrs and not self._learned.known and self.consecutive_fixes == 0
-                and self._quiet.quiet(ep.t, ep.sats, np.where(ep.zd_base.el >= opt.elevation_mask_rad, ep.zd_base.el,
-                                                              np.nan)))
+                and not self.base_is_vrs and not self._learned.known and self.consecutive_fixes == 0)
+
+    def _quiet_rate_ok(self, ep: _CommonEpoch) -> bool:
+        """The GF rate of the satellites above the mask says the DD ionosphere is quiet (QuietMonitor.quiet)."""
+        el = ep.zd_base.el
+        return self._quiet.quiet(ep.t, ep.sats, np.where(el >= self.opt.elevation_mask_rad, el, np.nan))
 
     def _resolve(self, sol: RtkSolution, dd: DDIndex, ep: _CommonEpoch, sd: SingleDifferences,
                  x_lin: np.ndarray) -> None:
@@ -1084,7 +1088,8 @@ class RtkFilter:
         need = self._confirm_needed()
         spans = self._spans_base_epochs(ep, need)
         quiet_ok = not self._quiet_mode or self._quiet_consistent(dd, ep, rows, attempt)
-        if count >= need and spans and quiet_ok:
+        rate_ok = not self._quiet_mode or self._quiet_rate_ok(ep)
+        if count >= need and spans and quiet_ok and rate_ok:
             self._accept_fix(sol, attempt, n_all)
             if self.opt.iono_prior == "learned" and dd.ion is not None:
                 r = rows[dd.f[rows] == 0]
@@ -1102,6 +1107,8 @@ class RtkFilter:
             if not quiet_ok:
                 sol.message += ", DD ionosphere beyond the quiet prior"
                 self.confirmation.reset()
+            elif not rate_ok:
+                sol.message += ", GF rate not quiet (yet)"
 
     def _spans_base_epochs(self, ep: _CommonEpoch, need: int) -> bool:
         """Whether a new fix's streak of agreeing decisions spans two base epochs, as it must on aged
