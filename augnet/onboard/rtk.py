@@ -1091,7 +1091,10 @@ class RtkFilter:
         rate_ok = not self._quiet_mode or self._quiet_rate_ok(ep)
         if count >= need and spans and quiet_ok and rate_ok:
             self._accept_fix(sol, attempt, n_all)
-            if self.opt.iono_prior == "learned" and dd.ion is not None:
+            # not from a partial quiet fix: its DD ionosphere was pulled to zero by the quiet prior itself, and a
+            # level learned from it took the unfixed satellites' ionosphere out (UPC2 05:40, decision 0221)
+            if (self.opt.iono_prior == "learned" and dd.ion is not None
+                    and not (self._quiet_mode and attempt.fix.count < n_all)):
                 r = rows[dd.f[rows] == 0]
                 el = ep.zd_base.el
                 m = np.hypot(ionosphere_prior.mapping(el[dd.k[r]]), ionosphere_prior.mapping(el[dd.ref[r]]))
