@@ -56,6 +56,7 @@ def rtk(
     from augnet.onboard.inputs import (InputError, antenna_setup, load_nav, load_obs, parse_gpst, parse_position,
                                        time_window)
     from augnet.onboard.base_interpolation import MAX_INTERPOLATION_SPAN_S
+    from augnet.onboard.ionosphere_prior import BASE_RATE_SPAN_S
     from augnet.onboard.postprocess import process
     from augnet.onboard.rtk import RtkOptions
     from augnet.onboard.solution import write_csv
@@ -91,7 +92,8 @@ def rtk(
             t1 = parse_gpst(end) if end is not None else math.inf
             rov = time_window(rov, t0, t1)
             # the base epoch in force at the first rover epoch is the latest before it
-            bas = time_window(bas, t0 - opt.max_age_s - 1.0,
+            # ... and its past before it, the quiet-ionosphere rate's base part (decision 0221)
+            bas = time_window(bas, t0 - max(opt.max_age_s + 1.0, BASE_RATE_SPAN_S),
                               t1 + (MAX_INTERPOLATION_SPAN_S if base_interp else 0.0))
         if base_pos.strip().lower() == "header":
             bp = bas.approx_position_m

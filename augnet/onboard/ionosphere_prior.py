@@ -140,45 +140,119 @@ QUIET_CHECK_SIGMAS = 3.0
 GPS_MU2 = (1575.42 / 1227.60) ** 2
 
 
-class QuietMonitor:
-    """The DD ionosphere's rate [m/s, vertical, L1] from the SD geometry-free phase, and whether it is quiet."""
+# The base's part of the SD GF rate from its own measured epochs (a 30 s base; in a file, also the
+# BASE_RATE_SPAN_S before the rover's start): a quadratic least-squares fit over BASE_RATE_SPAN_S [s] of the
+# unbroken arc, its derivative at the rover window's middle, from BASE_RATE_MIN_EPOCHS epochs.  Inside a 30 s
+# SD slope the interpolated base contributes two epochs' GF noise over 30 s, ~1e-4 m/s on catnet-2010-077,
+# the gate's own size; twenty epochs average it down (docs/decisions/0221).
+BASE_RATE_SPAN_S = 600.0
+BASE_RATE_MIN_EPOCHS = 8
+# A base arc broken by a gap longer than this [s] (one 30 s interval and slack, cycleslip.BASE_MAX_ARC_GAP_S).
+BASE_RATE_MAX_GAP_S = 35.0
+
+
+class BaseRateHistory:
+    """The base's own zero-difference geometry-free phase per satellite, at its measured epochs."""
 
     def __init__(self):
-        # per satellite: the window's start time and its least-squares sums (n, sum dt, sum g, sum dt^2, sum dt g)
-        self._win: dict[str, tuple[float, np.ndarray]] = {}
-        self._rate: dict[str, tuple[float, float]] = {}  # per satellite: (t, SD GF rate [m/s]) of its last window
+        self._arc: dict[str, list[tuple[float, float]]] = {}
 
-    def update(self, t: float, sats: list[str], gf_m: np.ndarray, broken: np.ndarray) -> None:
-        """This epoch's SD geometry-free phase per satellite (NaN: none); `broken`: its arc slipped."""
+    def update(self, t: float, sats, gf_m: np.ndarray, broken: np.ndarray) -> None:
+        """A measured base epoch's GF [m] per satellite (NaN: none); `broken`: its arc slipped."""
         for k, sat in enumerate(sats):
             g = float(gf_m[k])
             if broken[k] or not np.isfinite(g):
-                self._win.pop(sat, None)
-                self._rate.pop(sat, None)
+                self._arc.pop(sat, None)
                 continue
-            win = self._win.get(sat)
-            if win is None:
-                win = self._win[sat] = (t, np.zeros(5))
-            dt = t - win[0]
-            win[1][:] += (1.0, dt, g, dt * dt, dt * g)
-            slope = _slope(win[1])
-            # a least-squares slope over the window's every epoch (a 1 Hz rover's GF noise averaged down), usable
-            # from RATE_MIN_S; a full window closes and the next one starts, its rate kept meanwhile
-            if dt >= RATE_WINDOW_S:
-                self._rate[sat] = (t, slope)
-                self._win[sat] = (t, np.zeros(5))
-            elif dt >= RATE_MIN_S and (sat not in self._rate or t - self._rate[sat][0] > RATE_WINDOW_S):
-                self._rate[sat] = (t, slope)
+            arc = self._arc.setdefault(sat, [])
+            if arc and t <= arc[-1][0]:
+                continue  # this epoch seen already (a 30 s base reused by a 1 Hz rover)
+            if arc and t - arc[-1][0] > BASE_RATE_MAX_GAP_S:
+                arc.clear()
+            arc.append((t, g))
+            while arc[0][0] < t - BASE_RATE_SPAN_S:
+                arc.pop(0)
+
+    def break_arcs(self, sats, broken: np.ndarray) -> None:
+        for sat, b in zip(sats, broken):
+            if b:
+                self._arc.pop(sat, None)
+
+    def rate(self, sat: str, t: float) -> float | None:
+        """d GF / dt [m/s] of the base's arc at t (inside it, or no further than one gap past its last epoch),
+        or None."""
+        arc = self._arc.get(sat)
+        if not arc or len(arc) < BASE_RATE_MIN_EPOCHS or not arc[0][0] <= t <= arc[-1][0] + BASE_RATE_MAX_GAP_S:
+            return None
+        a = np.asarray(arc)
+        x = a[:, 0] - arc[-1][0]
+        c2, c1, _ = np.polyfit(x, a[:, 1], 2)
+        return float(2.0 * c2 * (t - arc[-1][0]) + c1)
+
+
+class QuietMonitor:
+    """The DD ionosphere's rate [m/s, vertical, L1] from the SD geometry-free phase, and whether it is quiet.
+
+    Per satellite the SD rate is the rover's own GF slope (1 Hz) minus the base's (`BaseRateHistory`, many
+    30 s epochs) where the base's arc is long enough; otherwise the slope of the SD GF itself."""
+
+    def __init__(self, base: BaseRateHistory | None = None):
+        # per satellite and series ("sd", "rov"): the window's start time and its least-squares sums
+        # (n, sum dt, sum g, sum dt^2, sum dt g)
+        self._win: dict[tuple[str, str], tuple[float, np.ndarray]] = {}
+        # per satellite and series: (t, window middle, GF rate [m/s]) of its last window
+        self._rate: dict[tuple[str, str], tuple[float, float, float]] = {}
+        self.base = base if base is not None else BaseRateHistory()
+
+    def update(self, t: float, sats: list[str], gf_m: np.ndarray, broken: np.ndarray,
+               gf_rover_m: np.ndarray | None = None) -> None:
+        """This epoch's SD geometry-free phase per satellite (NaN: none), and the rover's own; `broken`: its arc
+        slipped."""
+        series = [("sd", gf_m)] + ([("rov", gf_rover_m)] if gf_rover_m is not None else [])
+        for name, gfs in series:
+            for k, sat in enumerate(sats):
+                key = (sat, name)
+                g = float(gfs[k])
+                if broken[k] or not np.isfinite(g):
+                    self._win.pop(key, None)
+                    self._rate.pop(key, None)
+                    continue
+                win = self._win.get(key)
+                if win is None:
+                    win = self._win[key] = (t, np.zeros(5))
+                dt = t - win[0]
+                win[1][:] += (1.0, dt, g, dt * dt, dt * g)
+                slope = _slope(win[1])
+                # a least-squares slope over the window's every epoch (a 1 Hz rover's GF noise averaged down),
+                # usable from RATE_MIN_S; a full window closes and the next one starts, its rate kept meanwhile
+                mid = 0.5 * (win[0] + t)
+                if dt >= RATE_WINDOW_S:
+                    self._rate[key] = (t, mid, slope)
+                    self._win[key] = (t, np.zeros(5))
+                elif dt >= RATE_MIN_S and (key not in self._rate or t - self._rate[key][0] > RATE_WINDOW_S):
+                    self._rate[key] = (t, mid, slope)
+
+    def _sd_rate(self, t: float, sat: str) -> float | None:
+        """The satellite's SD GF rate [m/s]: rover minus base where the base's arc has it, else the SD slope."""
+        rov = self._rate.get((sat, "rov"))
+        if rov is not None and t - rov[0] <= 2 * RATE_WINDOW_S:
+            b = self.base.rate(sat, rov[1])
+            if b is not None:
+                return rov[2] - b
+        sd = self._rate.get((sat, "sd"))
+        if sd is not None and t - sd[0] <= 2 * RATE_WINDOW_S:
+            return sd[2]
+        return None
 
     def rms_rate(self, t: float, sats: list[str], el: np.ndarray) -> float | None:
         """The RMS vertical DD L1 ionosphere rate [m/s] over this epoch's satellites with a recent window
         (against the highest of them); None with fewer than DAY_MIN_SATS + 1."""
-        idx = [k for k, s in enumerate(sats) if s in self._rate and t - self._rate[s][0] <= 2 * RATE_WINDOW_S
-               and np.isfinite(el[k])]
-        if len(idx) < DAY_MIN_SATS + 1:
+        rates = [(k, self._sd_rate(t, s)) for k, s in enumerate(sats) if np.isfinite(el[k])]
+        rates = [(k, r) for k, r in rates if r is not None and np.isfinite(r)]
+        if len(rates) < DAY_MIN_SATS + 1:
             return None
-        idx = np.array(idx)
-        r = np.array([self._rate[sats[k]][1] for k in idx]) / (GPS_MU2 - 1.0)
+        idx = np.array([k for k, _ in rates])
+        r = np.array([v for _, v in rates]) / (GPS_MU2 - 1.0)
         m = mapping(el[idx])
         ref = int(np.argmax(el[idx]))
         dd = np.delete((r - r[ref]) / np.hypot(m, m[ref]), ref)

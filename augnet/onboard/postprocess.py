@@ -10,6 +10,7 @@ the base position and the solution are the markers' (RTKLIB with ant1/ant2-antty
 
 from __future__ import annotations
 
+import copy
 from typing import Iterator
 
 import numpy as np
@@ -46,6 +47,15 @@ def process(rover: ObsArrays, base: ObsArrays, nav: NavigationData, base_positio
                     rover_antenna=rover_antenna)
     if interpolate_base:
         flag_slips([base_epochs[i] for i in order])
+    # the base's past before the rover's first epoch: the quiet-ionosphere rate's base part (decision 0221)
+    t_first = rov_epochs[0].time if rov_epochs else np.inf
+    history = [base_epochs[i] for i in order if base_epochs[i].time < t_first - EPOCH_MATCH_TOLERANCE_S]
+    if not interpolate_base:
+        # on copies: the base epoch in force at the first rover epoch is handed on with its own LLI only
+        history = [copy.copy(b) for b in history]
+        flag_slips(history)
+    for b in history:
+        flt.observe_base_history(b)
     used_from = -1  # the base epoch whose loss-of-lock flags were last handed on
     for ep in rov_epochs:
         k = int(np.searchsorted(base_times, ep.time + EPOCH_MATCH_TOLERANCE_S, side="right")) - 1

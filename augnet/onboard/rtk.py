@@ -70,7 +70,7 @@ from augnet.onboard.double_difference import (
     zero_differences,
 )
 from augnet.onboard.motion import predict_pva
-from augnet.onboard.observations import EpochObs
+from augnet.onboard.observations import LLI_SLIP, EpochObs
 from augnet.onboard.spp import (
     SELECTION_CACHE_S,
     SatPositions,
@@ -268,6 +268,7 @@ class _CommonEpoch:
     mu: np.ndarray  # (n, nf) ionospheric scale of each slot against the system's first frequency
     slips: np.ndarray  # (n, nf) a slip at either end
     base_slipped_all: np.ndarray  # (n,) every slot of the base slipped
+    base_slips: np.ndarray  # (n, nf) a slip at the base
 
 
 @dataclass
@@ -322,6 +323,8 @@ class RtkFilter:
         # a computed (non-physical) base, a network VRS: its residual atmosphere is modelled
         self.base_is_vrs = bool(base_is_vrs)
         self.n_kin = 9 if (self.opt.mode == "kinematic" and self.opt.dynamics) else 3
+        # the base's own GF arcs (the quiet-ionosphere rate's base part): the base's, not the filter's, kept by reset
+        self._base_rate = ionosphere_prior.BaseRateHistory()
         self.reset()
 
     def reset(self) -> None:
@@ -340,7 +343,7 @@ class RtkFilter:
         self.confirmation = FixConfirmation(self.opt.min_fix_ambiguities)
         self.consecutive_fixes = 0
         # the quiet-ionosphere hypothesis (`_resolve_quiet`): the GF rate monitor and its own decision streak
-        self._quiet = ionosphere_prior.QuietMonitor()
+        self._quiet = ionosphere_prior.QuietMonitor(self._base_rate)
         self._quiet_confirmation = FixConfirmation(self.opt.min_fix_ambiguities)
         self._quiet_mode = False
         # the newest base epoch behind the first decision of the current streak (a new fix on aged corrections
@@ -644,7 +647,7 @@ class RtkFilter:
         sys_ = np.array([s[0] for s in sats])
         mu = (wl / np.array([first_wavelength(s) for s in sys_])[:, None]) ** 2
         return _CommonEpoch(rover.time, sats, sys_, ro, bo, sp_r, nf, valid, zd_base, wl, same_wl, mu,
-                            rslip[ri, :nf] | bslip[bi, :nf], bslip[bi, :nf].all(axis=1))
+                            rslip[ri, :nf] | bslip[bi, :nf], bslip[bi, :nf].all(axis=1), bslip[bi, :nf])
 
     def _restart_slipped(self, ep: _CommonEpoch) -> None:
         """Drop the ambiguities that slipped, and a satellite's ionosphere when every slot of the base
@@ -902,22 +905,45 @@ class RtkFilter:
     # integer ambiguity resolution
 
     def _watch_ionosphere_rate(self, ep: _CommonEpoch) -> None:
-        """Feed the quiet-ionosphere monitor this epoch's SD geometry-free phase (GPS L1 - L2 [m])."""
+        """Feed the quiet-ionosphere monitor this epoch's geometry-free phase (GPS L1 - L2 [m]): the rover's, the
+        SD, and the base's own at a measured base epoch."""
         if ep.nf < 2:
             return
         ro, bo = ep.rover, ep.base
-        gf = ((ro.phase_cyc[:, 0] * ep.wl[:, 0] - ro.phase_cyc[:, 1] * ep.wl[:, 1])
-              - (bo.phase_cyc[:, 0] * bo.wavelength_m[:, 0] - bo.phase_cyc[:, 1] * bo.wavelength_m[:, 1]))
-        gf = np.where((ep.sys_ == "G") & ep.same_wl[:, :2].all(axis=1), gf, np.nan)
-        self._quiet.update(ep.t, ep.sats, gf, ep.slips[:, :2].any(axis=1))
+        use = (ep.sys_ == "G") & ep.same_wl[:, :2].all(axis=1)
+        g_rov = np.where(use, ro.phase_cyc[:, 0] * ep.wl[:, 0] - ro.phase_cyc[:, 1] * ep.wl[:, 1], np.nan)
+        g_base = np.where(use, bo.phase_cyc[:, 0] * bo.wavelength_m[:, 0] - bo.phase_cyc[:, 1] * bo.wavelength_m[:, 1],
+                          np.nan)
+        base_broken = ep.base_slips[:, :2].any(axis=1)
+        if math.isnan(bo.newest_epoch_s) and math.isnan(bo.info_age_s):
+            self._base_rate.update(bo.time, ep.sats, g_base, base_broken)
+        else:
+            self._base_rate.break_arcs(ep.sats, base_broken)
+        self._quiet.update(ep.t, ep.sats, g_rov - g_base, ep.slips[:, :2].any(axis=1), g_rov)
+
+    def observe_base_history(self, base: EpochObs) -> None:
+        """A measured base epoch before the rover's first (post-processing: the base file's past), for the base's
+        part of the quiet-ionosphere rate; its LLI carries its slips (`base_interpolation.flag_slips`)."""
+        if base.n_slots < 2:
+            return
+        b = base.sanitised()
+        sats = [str(s) for s in b.sats]
+        use = np.array([s[0] == "G" for s in sats], dtype=bool)
+        gf = np.where(use, b.phase_cyc[:, 0] * b.wavelength_m[:, 0] - b.phase_cyc[:, 1] * b.wavelength_m[:, 1], np.nan)
+        self._base_rate.update(b.time, sats, gf, ((b.lli[:, :2] & LLI_SLIP) != 0).any(axis=1))
 
     def _quiet_applies(self, ep: _CommonEpoch) -> bool:
         """Whether to try the quiet-ionosphere hypothesis this epoch: the ionosphere in the model on the per-km
-        prior of a physical base (the learned level not known yet) and the GF rate saying the night is quiet."""
+        prior of a physical base, the learned level not known yet.  (Its fix is declared only once the GF rate
+        says the night is quiet, `_quiet_rate_ok`; its decisions agree or not whatever the rate.)"""
         opt = self.opt
         return (self.iono_active and opt.iono_prior == "learned" and opt.iono_sigma_m is None
-                and not self.base_is_vrs and not self._learned.known and self.consecutive_fixes == 0
-                and self._quiet.quiet(ep.t, ep.sats, ep.zd_base.el))
+                and not self.base_is_vrs and not self._learned.known and self.consecutive_fixes == 0)
+
+    def _quiet_rate_ok(self, ep: _CommonEpoch) -> bool:
+        """The GF rate of the satellites above the mask says the DD ionosphere is quiet (QuietMonitor.quiet)."""
+        el = ep.zd_base.el
+        return self._quiet.quiet(ep.t, ep.sats, np.where(el >= self.opt.elevation_mask_rad, el, np.nan))
 
     def _resolve(self, sol: RtkSolution, dd: DDIndex, ep: _CommonEpoch, sd: SingleDifferences,
                  x_lin: np.ndarray) -> None:
@@ -1067,9 +1093,13 @@ class RtkFilter:
         need = self._confirm_needed()
         spans = self._spans_base_epochs(ep, need)
         quiet_ok = not self._quiet_mode or self._quiet_consistent(dd, ep, rows, attempt)
-        if count >= need and spans and quiet_ok:
+        rate_ok = not self._quiet_mode or self._quiet_rate_ok(ep)
+        if count >= need and spans and quiet_ok and rate_ok:
             self._accept_fix(sol, attempt, n_all)
-            if self.opt.iono_prior == "learned" and dd.ion is not None:
+            # not from a partial quiet fix: its DD ionosphere was pulled to zero by the quiet prior itself, and a
+            # level learned from it took the unfixed satellites' ionosphere out (UPC2 05:40, decision 0221)
+            if (self.opt.iono_prior == "learned" and dd.ion is not None
+                    and not (self._quiet_mode and attempt.fix.count < n_all)):
                 r = rows[dd.f[rows] == 0]
                 el = ep.zd_base.el
                 m = np.hypot(ionosphere_prior.mapping(el[dd.k[r]]), ionosphere_prior.mapping(el[dd.ref[r]]))
@@ -1085,6 +1115,8 @@ class RtkFilter:
             if not quiet_ok:
                 sol.message += ", DD ionosphere beyond the quiet prior"
                 self.confirmation.reset()
+            elif not rate_ok:
+                sol.message += ", GF rate not quiet (yet)"
 
     def _spans_base_epochs(self, ep: _CommonEpoch, need: int) -> bool:
         """Whether a new fix's streak of agreeing decisions spans two base epochs, as it must on aged
