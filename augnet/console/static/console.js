@@ -208,7 +208,15 @@ async function refreshAudit() {
 }
 
 async function refreshSections() {
-  try { state.sections = await api("GET", "/api/sections"); renderSections(); } catch (e) { console.warn(e); }
+  // re-drawn only when the picture changed: a re-draw replaces the buttons under a dispatcher's pointer
+  try {
+    const s = await api("GET", "/api/sections");
+    const key = JSON.stringify(s);
+    if (key === state.sectionsKey) return;
+    state.sections = s;
+    state.sectionsKey = key;
+    renderSections();
+  } catch (e) { console.warn(e); }
 }
 
 // The dispatcher's actions (each needs the reason typed below the view; audited by the server).
