@@ -18,8 +18,8 @@ import asyncio
 from rssp1.atp import AtpSimulator, BaliseLocation, OnboardAtpLink
 from rssp1.config import DeviceConfig, LinkTiming
 from rssp1.endpoint import Endpoint
-from rssp1.transport import UdpLink
 
+from augnet.system import loopback_link
 from augnet.onboard.balise_atp import AtpLinkSink
 from augnet.onboard.balise_timer import BaliseGroup, Passage
 
@@ -74,20 +74,10 @@ class AtpConnection:
         self.tasks: list[asyncio.Task] = []
 
     async def start(self, host: str = "127.0.0.1") -> None:
-        atp_link = await UdpLink.open(self.atp, LINK_TIMING.cycle_s, (host, 0), (host, 9))
-        onboard_link = await UdpLink.open(self.link, LINK_TIMING.cycle_s, (host, 0), atp_link.local_address)
-        atp_link.remote = onboard_link.local_address
-        self.links = [onboard_link, atp_link]
-        self.tasks = [asyncio.ensure_future(link.run()) for link in self.links]
+        self.links, self.tasks = await loopback_link.open_pair(self.link, self.atp, LINK_TIMING.cycle_s, host)
 
     async def stop(self) -> None:
-        for link in self.links:
-            r = link.close()
-            if asyncio.iscoroutine(r):
-                await r
-        for t in self.tasks:
-            t.cancel()
-        await asyncio.gather(*self.tasks, return_exceptions=True)
+        await loopback_link.close(self.links, self.tasks)
 
     def snapshot(self) -> dict:
         """What the ATP received, in order, and what the link counted."""

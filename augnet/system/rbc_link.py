@@ -28,7 +28,8 @@ from rssp1.config import DeviceConfig, LinkTiming
 from rssp1.endpoint import Endpoint
 from rssp1.messages import AlarmCode, SectionStatus, Severity
 from rssp1.rbc import CentreRbcLink, RbcSimulator
-from rssp1.transport import UdpLink
+
+from augnet.system import loopback_link
 
 log = logging.getLogger(__name__)
 
@@ -107,11 +108,7 @@ class RbcConnection:
         self.tasks: list = []
 
     async def start(self, host: str = "127.0.0.1") -> None:
-        rbc_link = await UdpLink.open(self.rbc, LINK_TIMING.cycle_s, (host, 0), (host, 9))
-        centre_link = await UdpLink.open(self.centre, LINK_TIMING.cycle_s, (host, 0), rbc_link.local_address)
-        rbc_link.remote = centre_link.local_address
-        self.links = [centre_link, rbc_link]
-        self.tasks = [asyncio.ensure_future(link.run()) for link in self.links]
+        self.links, self.tasks = await loopback_link.open_pair(self.centre, self.rbc, LINK_TIMING.cycle_s, host)
         if self.on_alarm is not None:
             self.tasks.append(asyncio.ensure_future(self._forward_alarms()))
 
@@ -177,10 +174,4 @@ class RbcConnection:
                 "last_rbc_alarm": (self.rbc.alarms[-1].code.name if self.rbc.alarms else None)}
 
     async def stop(self) -> None:
-        for link in self.links:
-            r = link.close()
-            if asyncio.iscoroutine(r):
-                await r
-        for t in self.tasks:
-            t.cancel()
-        await asyncio.gather(*self.tasks, return_exceptions=True)
+        await loopback_link.close(self.links, self.tasks)
