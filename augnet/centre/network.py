@@ -33,7 +33,7 @@ from augnet.centre.ionosphere_model import IonosphereModel, ionosphere_model, mo
 from augnet.centre.ionosphere_prior import share_network_ionosphere
 from augnet.centre.integrity import Alarm, IntegrityMonitor
 from augnet.centre.observations import StationEpoch
-from augnet.centre.satellite_geometry import SatelliteGeometry, satellite_geometry
+from augnet.centre.satellite_geometry import GeometryRequest, SatelliteGeometry, station_geometries
 from augnet.gnss.antex import ReceiverAntenna
 from augnet.gnss.ephemeris import NavigationData
 from augnet.gnss.geometry import ecef_to_enu
@@ -356,12 +356,12 @@ class NetworkSolver:
     def _geometry(self, epochs, present, nav) -> dict[str, SatelliteGeometry]:
         """Each present station's satellite geometry, computed once for all its baselines; the receiver clocks are
         kept as the next epoch's starting guess."""
-        geom: dict[str, SatelliteGeometry] = {}
         pos = {n: i for i, n in enumerate(self.names)}
-        for n in present:
-            ep = epochs[n]
-            geom[n] = satellite_geometry(ep.sats, ep.t_gpst, self.xyz[pos[n]], nav, ep.code_m[:, 0], self.clocks[n],
-                                         self.antennas.get(n), ep.codes)
+        names = list(present)
+        requests = [GeometryRequest(epochs[n].sats, epochs[n].t_gpst, self.xyz[pos[n]], epochs[n].code_m[:, 0],
+                                    self.clocks[n], self.antennas.get(n), epochs[n].codes) for n in names]
+        geom = dict(zip(names, station_geometries(requests, nav)))  # every station's satellites in one evaluation
+        for n in names:
             self.clocks[n] = geom[n].clock_s
         return geom
 

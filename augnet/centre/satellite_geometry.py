@@ -17,7 +17,7 @@ import numpy as np
 from augnet.gnss import troposphere
 from augnet.gnss.antex import ReceiverAntenna
 from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
-from augnet.gnss.ephemeris import NavigationData, transit
+from augnet.gnss.ephemeris import NavigationData, Transit, transit_each
 from augnet.gnss.geometry import azimuth_elevation, ecef_to_geodetic
 from augnet.gnss.time import to_datetime
 
@@ -56,19 +56,68 @@ def satellite_geometry(sats, t_tag_gpst: float, xyz_m, nav: NavigationData, code
     station's calibration) and `codes` (S, 2) the RINEX codes observed, `antenna_m` holds its phase-centre
     corrections.
     """
-    sats = np.asarray(sats)
-    xyz = np.asarray(xyz_m, float)
-    dtr = clock_s
-    iterations = 2 if code_m is not None else 1
-    for _ in range(iterations):
-        tr = transit(nav, list(sats), xyz, t_tag_gpst - dtr)
-        if code_m is None:
+    return station_geometries([GeometryRequest(sats, t_tag_gpst, xyz_m, code_m, clock_s, antenna, codes)], nav)[0]
+
+
+@dataclass(frozen=True)
+class GeometryRequest:
+    """One point's arguments of `satellite_geometry`."""
+
+    sats: object
+    t_tag_gpst: float
+    xyz_m: object
+    code_m: object = None
+    clock_s: float = 0.0
+    antenna: ReceiverAntenna | None = None
+    codes: object = None
+
+
+def station_geometries(requests: list[GeometryRequest], nav: NavigationData) -> list[SatelliteGeometry]:
+    """`satellite_geometry` of many points at once: every point's satellites go through one transit evaluation
+    per clock iteration (numpy over all stations' satellites, each point's Kepler iterations as if alone), so
+    the results are those of one call per point, bit for bit."""
+    sats = [np.asarray(r.sats) for r in requests]
+    xyz = [np.asarray(r.xyz_m, float) for r in requests]
+    dtr = [r.clock_s for r in requests]
+    trs: list[Transit | None] = [None] * len(requests)
+    # stations still iterating: the clock from the code is estimated twice (once without code: not at all)
+    todo = list(range(len(requests)))
+    for it in range(2):
+        todo = [i for i in todo if it == 0 or requests[i].code_m is not None]
+        if not todo:
             break
-        res = np.asarray(code_m, float) - tr.range_m + C * tr.sat_clock_bias_s
-        ok = np.isfinite(res)
-        if not ok.any():
-            break
-        dtr = float(np.median(res[ok])) / C
+        for i, tr in zip(todo, _transits(nav, [sats[i] for i in todo], [xyz[i] for i in todo],
+                                         [requests[i].t_tag_gpst - dtr[i] for i in todo])):
+            trs[i] = tr
+        nxt = []
+        for i in todo:
+            if requests[i].code_m is None:
+                continue
+            res = np.asarray(requests[i].code_m, float) - trs[i].range_m + C * trs[i].sat_clock_bias_s
+            ok = np.isfinite(res)
+            if not ok.any():
+                continue
+            dtr[i] = float(np.median(res[ok])) / C
+            nxt.append(i)
+        todo = nxt
+    return [_geometry(sats[i], r.t_tag_gpst, xyz[i], trs[i], dtr[i], r.antenna, r.codes)
+            for i, r in enumerate(requests)]
+
+
+def _transits(nav: NavigationData, sats: list[np.ndarray], xyz: list[np.ndarray], t_rx: list[float]) -> list[Transit]:
+    """One `transit` per point, evaluated together (`transit_each`) and split again."""
+    counts = [len(s) for s in sats]
+    flat = transit_each(nav, np.concatenate([np.asarray(s, dtype=object) for s in sats]) if sats else [],
+                        np.repeat(np.asarray(xyz).reshape(-1, 3), counts, axis=0),
+                        np.repeat(np.asarray(t_rx, float), counts), np.repeat(np.arange(len(sats)), counts))
+    out, at = [], 0
+    for n in counts:
+        out.append(Transit(*(f[at:at + n] for f in flat)))
+        at += n
+    return out
+
+
+def _geometry(sats, t_tag_gpst: float, xyz, tr: Transit, dtr: float, antenna, codes) -> SatelliteGeometry:
     az, el = azimuth_elevation(xyz, tr.sat_position_m)
     lat, _, h = ecef_to_geodetic(xyz)
     doy = to_datetime(t_tag_gpst).timetuple().tm_yday

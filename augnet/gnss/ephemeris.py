@@ -220,20 +220,33 @@ class SatelliteState(NamedTuple):
     relativistic_s: np.ndarray  # (...) the relativistic term alone (already in clock_bias_s)
 
 
-def solve_kepler(mean_anomaly, eccentricity):
-    """Eccentric anomaly E with E - e sin E = M, by Newton's method on whole arrays."""
+def solve_kepler(mean_anomaly, eccentricity, groups=None):
+    """Eccentric anomaly E with E - e sin E = M, by Newton's method on whole arrays.
+
+    `groups` (flat arrays only: a non-negative int per element) iterates each group as if solved alone: a group
+    stops once all its steps are within tolerance, so many receivers solved in one call give the same bits as
+    one call each."""
     m = np.asarray(mean_anomaly, dtype=float)
     e = np.asarray(eccentricity, dtype=float)
     ecc = np.array(m, copy=True)
+    live = None if groups is None or not m.size else np.ones(m.shape, dtype=bool)
     for _ in range(KEPLER_MAX_ITERATIONS):
         step = (ecc - e * np.sin(ecc) - m) / (1.0 - e * np.cos(ecc))
-        ecc = ecc - step
-        if np.all(np.abs(step) <= KEPLER_TOLERANCE_RAD):
+        converged = np.abs(step) <= KEPLER_TOLERANCE_RAD
+        if live is None:
+            ecc = ecc - step
+            if np.all(converged):
+                break
+            continue
+        ecc = np.where(live, ecc - step, ecc)
+        open_groups = np.bincount(groups, weights=live & ~converged, minlength=int(groups.max()) + 1) > 0
+        live &= open_groups[groups]
+        if not live.any():
             break
     return ecc
 
 
-def satellite_state(table: EphemerisTable, t_gpst, offset_s=0.0) -> SatelliteState:
+def satellite_state(table: EphemerisTable, t_gpst, offset_s=0.0, groups=None) -> SatelliteState:
     """Evaluate every row of `table` at GPST time(s) `t_gpst` + `offset_s` (shapes broadcast).
 
     `offset_s` keeps small time differences (a signal transit time, a finite-difference step) at
@@ -242,6 +255,7 @@ def satellite_state(table: EphemerisTable, t_gpst, offset_s=0.0) -> SatelliteSta
     Position and velocity are analytic (derivatives of the ICD algorithm), the clock is the
     af-polynomial about toc plus the relativistic term F e sqrt(A) sin E; TGD/BGD are not included
     (add `group_delay_s` for the signal used).  BDS GEO rows get the D2 -5 degree frame rotation.
+    `groups`: as `solve_kepler`'s (flat rows, several receivers' satellites in one call).
     """
     t = np.asarray(t_gpst, dtype=float)
     c = table.columns
@@ -254,7 +268,7 @@ def satellite_state(table: EphemerisTable, t_gpst, offset_s=0.0) -> SatelliteSta
     tk = (t - table.toe_gpst) + off
     e = c["e"]
     m = c["m0"] + n * tk
-    ecc = solve_kepler(m, e)
+    ecc = solve_kepler(m, e, groups)
     sin_e, cos_e = np.sin(ecc), np.cos(ecc)
     one_m_ecos = 1.0 - e * cos_e
     e_dot = n / one_m_ecos
@@ -449,6 +463,27 @@ class NavigationData:
             out[..., j] = np.where(found, cand[best], -1)
         return out
 
+    def select_each(self, sats: Sequence[str], t_gpst) -> np.ndarray:
+        """`select` of element-wise pairs: row index of the set for satellite sats[i] at time t_gpst[i] (flat,
+        same length), -1 if none; one pass per distinct satellite instead of one per pair."""
+        t = np.asarray(t_gpst, dtype=float).reshape(-1)
+        sats = np.asarray([str(s) for s in sats], dtype=object)
+        out = np.full(t.shape, -1, dtype=int)
+        tb = self.table
+        for sat in dict.fromkeys(sats.tolist()):
+            cand = self._by_sat.get(sat)
+            if cand is None or len(cand) == 0:
+                continue
+            at = np.flatnonzero(sats == sat)
+            dt = t[at, None] - tb.toe_gpst[cand]
+            ok = np.abs(dt) <= self._max_dist[cand]
+            ok &= (tb.system[cand] != "E") | (dt > 0.0)
+            cost = np.where(ok, np.abs(dt), np.inf)  # as `select`: nearest toe, ties to the later toe
+            best = np.argmin(cost, axis=-1)
+            found = np.take_along_axis(ok, best[..., None], axis=-1)[..., 0]
+            out[at] = np.where(found, cand[best], -1)
+        return out
+
     def states(self, sats: Sequence[str], t_gpst) -> tuple[SatelliteState, np.ndarray]:
         """Satellite states for each (time, satellite) and the validity mask (an ephemeris found).
 
@@ -514,6 +549,25 @@ def transit(nav: NavigationData, sats: Sequence[str], receiver_ecef_m, t_receive
     t_rx = np.asarray(t_receive_gpst, dtype=float)
     rx = np.asarray(receiver_ecef_m, dtype=float)
     idx = nav.select(sats, t_rx)
+    t_rx_b = np.broadcast_to(t_rx[..., None], idx.shape)
+    return _transit_rows(nav, idx, rx[..., None, :] if rx.ndim > 1 else rx, t_rx_b, iterations, None)
+
+
+def transit_each(nav: NavigationData, sats: Sequence[str], receiver_ecef_m, t_receive_gpst, groups,
+                 *, iterations: int = TRANSIT_ITERATIONS) -> Transit:
+    """`transit` of element-wise triples, flat (M,): satellite sats[i] seen from receiver_ecef_m[i] (M, 3) at
+    t_receive_gpst[i]; `groups` (M,) numbers the receivers, whose Kepler iterations run as in one `transit` call
+    each (the same bits), so a network's stations share one evaluation per epoch."""
+    t_rx = np.asarray(t_receive_gpst, dtype=float).reshape(-1)
+    idx = nav.select_each(sats, t_rx)
+    return _transit_rows(nav, idx, np.asarray(receiver_ecef_m, dtype=float).reshape(-1, 3), t_rx, iterations,
+                         np.asarray(groups, dtype=int).reshape(-1))
+
+
+def _transit_rows(nav: NavigationData, idx: np.ndarray, rx_b: np.ndarray, t_rx_b: np.ndarray, iterations: int,
+                  groups) -> Transit:
+    """The transit iteration for selected ephemeris rows `idx` (-1: none), receivers `rx_b` and receive times
+    `t_rx_b` broadcast to idx's shape."""
     valid = idx >= 0
     if not len(nav.table):
         st = _nan_state(idx.shape)
@@ -522,16 +576,14 @@ def transit(nav: NavigationData, sats: Sequence[str], receiver_ecef_m, t_receive
                        st.clock_drift_s_s, np.full(idx.shape + (3,), np.nan), idx, valid)
     rows = nav.table.take(np.where(valid, idx, 0))
     _, omge, _ = _system_constants(rows.system)
-    t_rx_b = np.broadcast_to(t_rx[..., None], idx.shape)
-    rx_b = rx[..., None, :] if rx.ndim > 1 else rx
     tau = np.full(idx.shape, NOMINAL_TRANSIT_S)
     for _ in range(iterations):
-        st = satellite_state(rows, t_rx_b, -tau)
+        st = satellite_state(rows, t_rx_b, -tau, groups)
         rot = _rotate_z(st.position_m, omge * tau)
         los = rot - rx_b
         rng = np.linalg.norm(los, axis=-1)
         tau = rng / SPEED_OF_LIGHT_M_S
-    st = satellite_state(rows, t_rx_b, -tau)
+    st = satellite_state(rows, t_rx_b, -tau, groups)
     rot = _rotate_z(st.position_m, omge * tau)
     los = rot - rx_b
     rng = np.linalg.norm(los, axis=-1)
