@@ -57,8 +57,8 @@ class _Track:
         """The tests against this arc's history (no update)."""
         dt = t - self.t[1]
         self._gf_residual = math.nan
-        if np.isfinite(self.gf[1]) and np.isfinite(gf):
-            if np.isfinite(self.gf[0]) and self.t[1] > self.t[0]:
+        if math.isfinite(self.gf[1]) and math.isfinite(gf):
+            if math.isfinite(self.gf[0]) and self.t[1] > self.t[0]:
                 pred = self.gf[1] + (self.gf[1] - self.gf[0]) * dt / (self.t[1] - self.t[0])
                 limit = GF_PREDICTED_SLIP_M + GF_PREDICTED_SLIP_M_AT_30S * (dt / GF_PREDICTION_REF_S) ** 2
                 if self.gf_n >= GF_MIN_RESIDUALS:
@@ -68,7 +68,7 @@ class _Track:
                     return True
             elif comb.slip_geometry_free(self.gf[1], gf, dt):
                 return True
-        if self.mw_n > 0 and np.isfinite(mw):
+        if self.mw_n > 0 and math.isfinite(mw):
             sigma = math.sqrt(self.mw_m2 / (self.mw_n - 1)) if self.mw_n >= MW_MIN_EPOCHS else 0.0
             if abs(mw - self.mw_mean) > max(MW_ARC_SLIP_FLOOR_CYCLES, MW_ARC_SLIP_SIGMAS * sigma):
                 return True
@@ -77,11 +77,11 @@ class _Track:
     def add(self, t: float, gf: float, mw: float) -> None:
         self.t = (self.t[1], t)
         self.gf = (self.gf[1], gf)
-        if np.isfinite(self._gf_residual):
+        if math.isfinite(self._gf_residual):
             self.gf_n += 1
             w = max(1.0 / self.gf_n, 1.0 / GF_RMS_EPOCHS)
             self.gf_ms += w * (self._gf_residual**2 - self.gf_ms)
-        if np.isfinite(mw):
+        if math.isfinite(mw):
             self.mw_n += 1
             d = mw - self.mw_mean
             self.mw_mean += d / self.mw_n

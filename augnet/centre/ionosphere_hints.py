@@ -49,9 +49,10 @@ class IonosphereHints:
         if not cfg.iono_hints:
             return {}
         shell_m = 1e3 * network_shell_height_km(cfg.iono_shell_height_km)
-        info = {e: (r, {str(s): k for k, s in enumerate(r.sats)}) for e, r in results.items() if r is not None}
+        sources = _Sources(results, priors)
         hints: dict[Edge, dict[str, tuple]] = {}
-        for t, (rt, post) in info.items():
+        for t, rt in sources.results.items():
+            post = sources.local[t]
             need = ~rt.fixed & (rt.eligible if rt.eligible is not None else True)
             if not need.any():
                 continue
@@ -59,64 +60,121 @@ class IonosphereHints:
             # the hint's error model is the quiet day's: scaled up with the day's level where it is higher
             activity = max(1.0, prior.level_ppm / cfg.iono_prior_ppm)
             mapping = thin_shell_mapping(np.radians(np.minimum(rt.elevation_a_deg, rt.elevation_b_deg)), shell_m)
-            out = {}
+            sats, refs, meff = [], [], []
             for k in np.flatnonzero(need):
                 s = str(rt.sats[k])
                 ref = rt.refs.get(s[0])
                 kr = post.get(ref)
                 if kr is None or s == ref:
                     continue
-                hint = self._hint(t, s, ref, math.hypot(mapping[k], mapping[kr]), activity, info, priors)
-                if hint is not None:
-                    out[s] = (ref, *hint)
-            if out:
-                hints[t] = out
+                sats.append(s)
+                refs.append(ref)
+                meff.append(math.hypot(mapping[k], mapping[kr]))
+            if sats:
+                out = self._hints(t, sats, refs, np.array(meff), activity, sources)
+                if out:
+                    hints[t] = out
         return hints
 
-    def _hint(self, t: Edge, s: str, ref: str, meff: float, activity: float, info, priors):
-        """(DD ionosphere [m], variance [m^2]) of (s - ref) on baseline t from the baselines near it, or None."""
+    def _hints(self, t: Edge, sats: list[str], refs: list[str], meff: np.ndarray, activity: float,
+               sources: _Sources) -> dict[str, tuple]:
+        """sat -> (ref, DD ionosphere [m], variance [m^2]) of each (sat - ref) on baseline t from the baselines near
+        it, where it says more than t's prior. Vectorised over t's satellites, the sources taken in the same order
+        for each, so the sums (the hints) are those of one satellite at a time, bit for bit (`float_power`: the C
+        library's pow, as Python's ** on a float)."""
         cfg = self.cfg
         lt = self.length[t]
-        lam = np.eye(2) / (GRADIENT_PRIOR_FACTOR * cfg.iono_prior_ppm * PPM * meff) ** 2
-        vec = np.zeros(2)
-        used = 0
+        n = len(sats)
+        gs, gr = sources.ids(sats), sources.ids(refs)
+        lam00 = 1.0 / np.float_power(GRADIENT_PRIOR_FACTOR * cfg.iono_prior_ppm * PPM * meff, 2.0)
+        lam01 = np.zeros(n)
+        lam11 = lam00.copy()
+        vec0, vec1 = np.zeros(n), np.zeros(n)
+        used = np.zeros(n, dtype=bool)
         for e, dist in self.near[t]:
-            src = info.get(e)
-            if src is None:
+            re = sources.results.get(e)
+            if re is None:
                 continue
-            re, pe = src
-            ks, kq = pe.get(s), pe.get(ref)
-            if ks is None or kq is None:
+            ks, kq = sources.index[e][gs], sources.index[e][gr]
+            seen = (ks >= 0) & (kq >= 0)
+            if not seen.any():
                 continue
+            ks, kq = np.where(seen, ks, 0), np.where(seen, kq, 0)
             dxe = self.vector[e]
-            var = (cfg.iono_hint_ppm_per_100km * activity * PPM * max(dist, MIN_DISTANCE_SHARE_OF_LENGTH * lt)
-                   / M_PER_100_KM * self.length[e] * meff) ** 2
-            if re.fixed[ks] and re.fixed[kq]:
-                y = re.dd_iono_m[ks] - re.dd_iono_m[kq]
-            elif (cfg.iono_hints_float and re.iono_float_m is not None and re.refs.get(s[0]) == ref
-                  and not set(e) & set(t)):
+            a = (cfg.iono_hint_ppm_per_100km * activity * PPM * max(dist, MIN_DISTANCE_SHARE_OF_LENGTH * lt)
+                 / M_PER_100_KM * self.length[e])
+            var = np.float_power(a * meff, 2.0)
+            fixed = seen & re.fixed[ks] & re.fixed[kq]
+            y = np.where(fixed, re.dd_iono_m[ks] - re.dd_iono_m[kq], np.nan)
+            if cfg.iono_hints_float and re.iono_float_m is not None and not set(e) & set(t):
                 # not fixed there either: the float estimate of a baseline with no station in common (independent
                 # multipath and noise), less its prior (which this baseline has too): in information form,
                 # data = posterior - prior
-                vp = priors[e].state_prior_dd(s, ref)
-                v = float(re.iono_float_var_m2[ks])
-                if not v < FLOAT_SOURCE_MAX_VARIANCE_SHARE * vp:
-                    continue
-                y = float(re.iono_float_m[ks]) * vp / (vp - v)
-                var += v * vp / (vp - v)
-            else:
+                fl = np.flatnonzero(seen & ~fixed & (sources.ref_of[e][gs] == gr))
+                if fl.size:
+                    sp = sources.state_priors(e)
+                    vp = sp[gs[fl]] + sp[gr[fl]]
+                    v = re.iono_float_var_m2[ks[fl]].astype(float)
+                    ok = v < FLOAT_SOURCE_MAX_VARIANCE_SHARE * vp
+                    fl, vp, v = fl[ok], vp[ok], v[ok]
+                    y[fl] = re.iono_float_m[ks[fl]].astype(float) * vp / (vp - v)
+                    var[fl] += v * vp / (vp - v)
+            use = np.isfinite(y)
+            if not use.any():
                 continue
-            if not np.isfinite(y):
-                continue
-            lam += np.outer(dxe, dxe) / var
-            vec += dxe * y / var
-            used += 1
-        if not used:
-            return None
+            w, yu = var[use], y[use]
+            lam00[use] += dxe[0] * dxe[0] / w  # as np.outer(dxe, dxe) / var, entry by entry
+            lam01[use] += dxe[0] * dxe[1] / w
+            lam11[use] += dxe[1] * dxe[1] / w
+            vec0[use] += dxe[0] * yu / w
+            vec1[use] += dxe[1] * yu / w
+            used |= use
+        if not used.any():
+            return {}
+        k = np.flatnonzero(used)
+        lam = np.stack([np.stack([lam00[k], lam01[k]], -1), np.stack([lam01[k], lam11[k]], -1)], -2)
         cov = np.linalg.inv(lam)
+        vec = np.stack([vec0[k], vec1[k]], -1)
         dxt = self.vector[t]
-        var = float(dxt @ cov @ dxt)
-        prior_dd = priors[t].level_ppm * PPM * lt * meff
-        if var < prior_dd**2:
-            return float(dxt @ cov @ vec), var
-        return None
+        level = sources.priors[t].level_ppm
+        out = {}
+        for j, i in enumerate(k):
+            var_t = float(dxt @ cov[j] @ dxt)
+            prior_dd = level * PPM * lt * float(meff[i])
+            if var_t < prior_dd**2:
+                out[sats[i]] = (refs[i], float(dxt @ cov[j] @ vec[j]), var_t)
+        return out
+
+
+class _Sources:
+    """An epoch's baseline results indexed by one numbering of all their satellites: per baseline, each
+    satellite's row (-1: not there) and its system's reference (-1: none), and the state priors on demand."""
+
+    def __init__(self, results: dict, priors: dict[Edge, IonospherePrior]):
+        self.results = {e: r for e, r in results.items() if r is not None}
+        self.priors = priors
+        self.local = {e: {str(s): k for k, s in enumerate(r.sats)} for e, r in self.results.items()}
+        self.number = {}
+        for pos in self.local.values():
+            for s in pos:
+                self.number.setdefault(s, len(self.number))
+        names = list(self.number)
+        self.index, self.ref_of = {}, {}
+        for e, r in self.results.items():
+            idx = np.full(len(names), -1, dtype=int)
+            for s, k in self.local[e].items():
+                idx[self.number[s]] = k
+            self.index[e] = idx
+            refs = {sys_: self.number.get(ref, -1) for sys_, ref in r.refs.items()}
+            self.ref_of[e] = np.array([refs.get(s[0], -1) for s in names], dtype=int)
+        self._names = names
+        self._state_priors: dict[Edge, np.ndarray] = {}
+
+    def ids(self, sats: list[str]) -> np.ndarray:
+        return np.array([self.number[s] for s in sats], dtype=int)
+
+    def state_priors(self, e: Edge) -> np.ndarray:
+        got = self._state_priors.get(e)
+        if got is None:
+            got = self._state_priors[e] = self.priors[e].state_priors(self._names)
+        return got

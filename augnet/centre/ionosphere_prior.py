@@ -194,6 +194,11 @@ class IonospherePrior:
         """The prior variance the DD ionosphere (sat - ref) had in the filter state [m^2] (NaN if unknown)."""
         return self._state_prior.get(sat, math.nan) + self._state_prior.get(ref, math.nan)
 
+    def state_priors(self, sats) -> np.ndarray:
+        """(S,) the prior variance each satellite's SD ionosphere state started with [m^2] (NaN if unknown):
+        `state_prior_dd` is the sum of two of them."""
+        return np.array([self._state_prior.get(s, math.nan) for s in sats], dtype=float)
+
     # --- learning ---------------------------------------------------------------------------------------
 
     def may_commit(self) -> bool:
