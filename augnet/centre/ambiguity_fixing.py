@@ -62,15 +62,23 @@ def pinned(value: float, sigma: float, max_sigma: float) -> int | None:
 
 
 def conditioned_on_pseudo_observations(x, P, D, a_hat, Q, H, z, var):
-    """The float ambiguities D x (a_hat, Q) given pseudo-observations z = H x + e, e ~ N(0, diag(var))."""
-    PHt = P @ H.T
-    S = H @ PHt + np.diag(var)
-    DPHt = D @ PHt
+    """The float ambiguities D x (a_hat, Q) given pseudo-observations z = H x + e, e ~ N(0, diag(var)).
+    D and H: dense matrices, or (plus, minus) index pairs of rows x[plus] - x[minus] (the same numbers, without
+    the products by zero: a sum of a, -b and zeros is a - b in any order)."""
+    if isinstance(H, tuple):
+        PHt = P[:, H[0]] - P[:, H[1]]
+        S = (PHt[H[0]] - PHt[H[1]]) + np.diag(var)
+        Hx = x[H[0]] - x[H[1]]
+    else:
+        PHt = P @ H.T
+        S = H @ PHt + np.diag(var)
+        Hx = H @ x
+    DPHt = PHt[D[0]] - PHt[D[1]] if isinstance(D, tuple) else D @ PHt
     try:
         G = np.linalg.solve(S, DPHt.T).T  # D P H^T S^-1
     except np.linalg.LinAlgError:
         return a_hat, Q
-    return a_hat + G @ (z - H @ x), Q - G @ DPHt.T
+    return a_hat + G @ (z - Hx), Q - G @ DPHt.T
 
 
 def dd_ambiguity_rows(state: StateLayout, sats, ks, ref_k, table: int) -> tuple[np.ndarray, np.ndarray]:
@@ -131,11 +139,11 @@ class BaselineAmbiguities:
         if not cs:
             return None
         cols, vals, zh = np.vstack(cs), np.vstack(vs), np.concatenate(zs)
-        P = state.P
+        Pc = state.P[cols[:, :, None], cols[:, None, :]]  # (rows, 4, 4) in one gather; summed in the same order
         var = np.zeros(len(zh))
         for i in range(cols.shape[1]):
             for j in range(cols.shape[1]):
-                var += vals[:, i] * vals[:, j] * P[cols[:, i], cols[:, j]]
+                var += vals[:, i] * vals[:, j] * Pc[:, i, j]
         new = var > HOLD_APPLIED_ABOVE * self.cfg.hold_sigma_cyc**2
         if not new.any():
             return None
@@ -231,15 +239,9 @@ class BaselineAmbiguities:
             hs.append((state.index(s) + IONO, state.index(h[0]) + IONO, h[1], h[2]))
         if not hs:
             return a_hat, Q
-        n = len(state.x)
-        D = np.zeros((len(cands), n))
-        D[np.arange(len(cands)), ia] = 1.0
-        D[np.arange(len(cands)), ib] -= 1.0
-        H = np.zeros((len(hs), n))
-        H[np.arange(len(hs)), [h[0] for h in hs]] = 1.0
-        H[np.arange(len(hs)), [h[1] for h in hs]] = -1.0
-        return conditioned_on_pseudo_observations(state.x, state.P, D, a_hat, Q, H, np.array([h[2] for h in hs]),
-                                                  [h[3] for h in hs])
+        H = (np.array([h[0] for h in hs], dtype=int), np.array([h[1] for h in hs], dtype=int))
+        return conditioned_on_pseudo_observations(state.x, state.P, (ia, ib), a_hat, Q, H,
+                                                  np.array([h[2] for h in hs]), [h[3] for h in hs])
 
     def _pinned(self, sats, cands, where, a_hat, Q, T, fix) -> dict[tuple[int, int], int]:
         """(k, table) -> integer for the DD ambiguities the conditioned solution pins, and the wide lanes it pins

@@ -124,6 +124,9 @@ class CycleSlipDetector:
         lli = ((a.lli & 1).any(axis=1)) | ((b.lli & 1).any(axis=1))
         slipped: set[str] = set()
         new_arc: set[str] = set()
+        sd_gf = gf_b - gf_a
+        # the per-satellite tests on Python floats: the same IEEE arithmetic, without numpy's scalar overhead
+        gf_a, gf_b, mw_a, mw_b, lli = gf_a.tolist(), gf_b.tolist(), mw_a.tolist(), mw_b.tolist(), lli.tolist()
         for k, s in enumerate(a.sats):
             s = str(s)
             arc = self._arcs.get(s)
@@ -142,7 +145,7 @@ class CycleSlipDetector:
                         arc.b = _Track()
             arc.a.add(t, gf_a[k], mw_a[k])
             arc.b.add(t, gf_b[k], mw_b[k])
-        return Slips(slipped, new_arc, gf_b - gf_a)
+        return Slips(slipped, new_arc, sd_gf)
 
     def seen(self, sats, t: float) -> None:
         for s in sats:

@@ -9,6 +9,7 @@ they refer to the ARP (equivalently: the modelled range to the phase centre is g
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -117,9 +118,15 @@ def _transits(nav: NavigationData, sats: list[np.ndarray], xyz: list[np.ndarray]
     return out
 
 
+@functools.lru_cache(maxsize=4096)  # a network's stations stand still: their latitude once, not every epoch
+def _latitude_height(xyz: tuple[float, float, float]) -> tuple[float, float]:
+    lat, _, h = ecef_to_geodetic(np.array(xyz))
+    return lat, h
+
+
 def _geometry(sats, t_tag_gpst: float, xyz, tr: Transit, dtr: float, antenna, codes) -> SatelliteGeometry:
     az, el = azimuth_elevation(xyz, tr.sat_position_m)
-    lat, _, h = ecef_to_geodetic(xyz)
+    lat, h = _latitude_height(tuple(np.asarray(xyz, float).reshape(3).tolist()))
     doy = to_datetime(t_tag_gpst).timetuple().tm_yday
     el_c = np.clip(np.where(np.isfinite(el), el, math.pi / 2), MIN_MODEL_ELEVATION_RAD, None)
     dh, dw = troposphere.slant_delays_m(el_c, lat, h, doy)
