@@ -19,7 +19,7 @@ from augnet.gnss import troposphere
 from augnet.gnss.antex import ReceiverAntenna
 from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
 from augnet.gnss.ephemeris import NavigationData, Transit, transit_each
-from augnet.gnss.geometry import azimuth_elevation, ecef_to_geodetic
+from augnet.gnss.geometry import azimuth_elevation_from, ecef_to_geodetic, enu_rotation
 from augnet.gnss.time import to_datetime
 
 C = SPEED_OF_LIGHT_M_S
@@ -118,19 +118,21 @@ def _transits(nav: NavigationData, sats: list[np.ndarray], xyz: list[np.ndarray]
     return out
 
 
-@functools.lru_cache(maxsize=4096)  # a network's stations stand still: their latitude once, not every epoch
-def _latitude_height(xyz: tuple[float, float, float]) -> tuple[float, float]:
-    lat, _, h = ecef_to_geodetic(np.array(xyz))
-    return lat, h
+@functools.lru_cache(maxsize=4096)  # a network's stations stand still: their frame once, not every epoch
+def _station_frame(xyz: tuple[float, float, float]):
+    """Latitude [rad], height [m], ECEF -> ENU rotation and the model's zenith delays [m] at a point."""
+    llh = ecef_to_geodetic(np.array(xyz))
+    zhd, zwd = troposphere.zenith_delays_m(llh[0], llh[2])
+    return llh[0], llh[2], enu_rotation(llh[..., 0], llh[..., 1]), zhd, zwd
 
 
 def _geometry(sats, t_tag_gpst: float, xyz, tr: Transit, dtr: float, antenna, codes) -> SatelliteGeometry:
-    az, el = azimuth_elevation(xyz, tr.sat_position_m)
-    lat, h = _latitude_height(tuple(np.asarray(xyz, float).reshape(3).tolist()))
+    lat, h, rot, zhd, zwd = _station_frame(tuple(np.asarray(xyz, float).reshape(3).tolist()))
+    az, el = azimuth_elevation_from(xyz, rot, tr.sat_position_m)
     doy = to_datetime(t_tag_gpst).timetuple().tm_yday
     el_c = np.clip(np.where(np.isfinite(el), el, math.pi / 2), MIN_MODEL_ELEVATION_RAD, None)
-    dh, dw = troposphere.slant_delays_m(el_c, lat, h, doy)
-    _, mw = troposphere.niell(el_c, lat, h, doy)
+    mh, mw = troposphere.niell(el_c, lat, h, doy)
+    dh, dw = zhd * mh, zwd * mw  # troposphere.slant_delays_m, with the wet mapping kept
     ant = None
     if antenna is not None and codes is not None:
         ant = np.nan_to_num(antenna.correction_m(az, el, sats, codes))

@@ -49,16 +49,16 @@ class SingleDifferences:
 def common_dual_frequency(ep_a: StationEpoch, ep_b: StationEpoch, excluded=frozenset()):
     """The two stations' observations of the satellites both track on both frequencies, same signals;
     with the index of each in its station's epoch. (None, None, None, None) with fewer than two."""
-    ia = {s: i for i, s in enumerate(ep_a.sats)}
-    dual_a = ep_a.dual_frequency()
-    dual_b = ep_b.dual_frequency()
-    pairs = [(ia[s], j) for j, s in enumerate(ep_b.sats)
-             if s in ia and s not in excluded and dual_a[ia[s]] and dual_b[j]
-             and np.array_equal(ep_a.freq_hz[ia[s]], ep_b.freq_hz[j])]
-    if len(pairs) < 2:
+    ia = {s: i for i, s in enumerate(np.asarray(ep_a.sats).tolist())}
+    common = [(ia[s], j) for j, s in enumerate(np.asarray(ep_b.sats).tolist()) if s in ia and s not in excluded]
+    if len(common) < 2:
         return None, None, None, None
-    ja = np.array([p[0] for p in pairs])
-    jb = np.array([p[1] for p in pairs])
+    ja = np.array([p[0] for p in common], dtype=int)
+    jb = np.array([p[1] for p in common], dtype=int)
+    same = ep_a.dual_frequency()[ja] & ep_b.dual_frequency()[jb] & (ep_a.freq_hz[ja] == ep_b.freq_hz[jb]).all(axis=1)
+    ja, jb = ja[same], jb[same]
+    if len(ja) < 2:
+        return None, None, None, None
     return ep_a.subset(ja), ep_b.subset(jb), ja, jb
 
 

@@ -83,10 +83,16 @@ def azimuth_elevation(receiver_ecef_m, sat_ecef_m):
     """(azimuth [rad, 0..2pi from north, clockwise], elevation [rad]) of satellites seen from a
     receiver.  receiver (..., 3) and satellites (..., 3) broadcast (e.g. (3,) with (N, 3))."""
     rx = np.asarray(receiver_ecef_m, dtype=float)
-    d = np.asarray(sat_ecef_m, dtype=float) - rx
     llh = ecef_to_geodetic(rx)
-    rot = enu_rotation(llh[..., 0], llh[..., 1])
-    enu = np.einsum("...ij,...j->...i", rot, d)
+    return azimuth_elevation_from(rx, enu_rotation(llh[..., 0], llh[..., 1]), sat_ecef_m)
+
+
+def azimuth_elevation_from(receiver_ecef_m, rotation, sat_ecef_m):
+    """`azimuth_elevation` with the receiver's ECEF -> ENU rotation given (`enu_rotation` of its latitude and
+    longitude): a station that stands still computes it once."""
+    rx = np.asarray(receiver_ecef_m, dtype=float)
+    d = np.asarray(sat_ecef_m, dtype=float) - rx
+    enu = np.einsum("...ij,...j->...i", rotation, d)
     e, n, u = enu[..., 0], enu[..., 1], enu[..., 2]
     az = np.mod(np.arctan2(e, n), 2.0 * np.pi)
     el = np.arctan2(u, np.hypot(e, n))
