@@ -61,6 +61,11 @@ def pinned(value: float, sigma: float, max_sigma: float) -> int | None:
     return n if sigma <= max_sigma and abs(value - n) < PINNED_SIGMAS * max_sigma else None
 
 
+def _pinned_mask(value: np.ndarray, sigma: np.ndarray, max_sigma: float) -> np.ndarray:
+    """`pinned` element-wise: True where the value is pinned to its nearest integer."""
+    return (sigma <= max_sigma) & (np.abs(value - np.round(value)) < PINNED_SIGMAS * max_sigma)
+
+
 def conditioned_on_pseudo_observations(x, P, D, a_hat, Q, H, z, var):
     """The float ambiguities D x (a_hat, Q) given pseudo-observations z = H x + e, e ~ N(0, diag(var)).
     D and H: dense matrices, or (plus, minus) index pairs of rows x[plus] - x[minus] (the same numbers, without
@@ -250,18 +255,16 @@ class BaselineAmbiguities:
         a_cond, Qc = conditioned_on_fix(a_hat, Q, T.T @ fix.Zs, fix.z_fixed)  # Zs in terms of (N1, N2)
         sig = np.sqrt(np.clip(np.diag(Qc), 0.0, None))
         out = {}
-        for i, kf in enumerate(cands):
-            val = pinned(a_cond[i], sig[i], sigma)
-            if val is not None:
-                out[kf] = val
-        for i, (k, fq) in enumerate(cands):
-            j = where.get((k, 1))
-            if fq != 0 or j is None or str(sats[k]) in self.fixed.wide_lane:
-                continue
+        for i in np.flatnonzero(_pinned_mask(a_cond, sig, sigma)):  # `pinned`, on the whole vector
+            out[cands[i]] = int(np.round(a_cond[i]))
+        pairs = [(i, where[(k, 1)], k) for i, (k, fq) in enumerate(cands)
+                 if fq == 0 and (k, 1) in where and str(sats[k]) not in self.fixed.wide_lane]
+        if pairs:
+            i, j = np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
             w = a_cond[i] - a_cond[j]
-            val = pinned(w, math.sqrt(max(Qc[i, i] + Qc[j, j] - 2 * Qc[i, j], 0.0)), sigma)
-            if val is not None:
-                out[(k, WIDE_LANE)] = val
+            sig_w = np.sqrt(np.maximum(Qc[i, i] + Qc[j, j] - 2 * Qc[i, j], 0.0))
+            for n in np.flatnonzero(_pinned_mask(w, sig_w, sigma)):
+                out[(pairs[n][2], WIDE_LANE)] = int(np.round(w[n]))
         return out
 
     def _confirm(self, sats, decisions, pins, sure: bool, commit: bool) -> None:
