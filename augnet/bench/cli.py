@@ -15,7 +15,7 @@ BENCHMARKS = {
     "rssp1": ("augnet.bench.rssp1", "RSSP-I: frames encoded + verified per second."),
     "caster": ("augnet.bench.caster", "NTRIP caster under load (see also `augnet loadtest`)."),
     "rtk": ("augnet.bench.rtk", "Onboard RTK: time per epoch against RTKLIB rnx2rtkp."),
-    "centre": ("augnet.bench.centre", "Network solution per epoch and VRS synthesis + encoding for many trains."),
+    "centre": ("augnet.bench.centre", "Network solution per epoch at 6/20/60 stations (rnx2rtkp yardstick, --against TREE) and VRS synthesis + encoding for many trains."),
     "protocol": ("augnet.bench.protocol", "Centre-process protocol: encode/decode per epoch against pickle."),
     "up": ("augnet.bench.up", "The whole system: console p99 and 2,000 trains' correction age while augnet up demo runs."),
 }
