@@ -116,40 +116,63 @@ def test_corrected_coordinates_clear_the_alarm(sky):
     assert mon.excluded == set()
 
 
+def test_the_bound_of_a_suspect_masters_sessions_carries_its_offset(sky):
+    """Sessions served by a station with an unmodelled offset d get (|u_j . d| + K sqrt(u' C u)) / K more sigma per
+    satellite; sessions served by others keep theirs."""
+    from augnet.centre.correction_bound import K_CORRECTION_BOUND
+    from augnet.centre.engine import CentreEngine
+
+    nav, xyz, t0, sats = sky
+    d = np.array([0.03, -0.02, 0.05])
+    cov = np.diag([1e-4, 1e-4, 4e-4])
+    monitor = SimpleNamespace(unmodelled_offset=lambda s: (d, cov) if s == "EAST" else None)
+    tr = transit(nav, sats, xyz["EAST"], t0)
+    vis = np.flatnonzero(np.asarray(tr.valid))
+    vrs = SimpleNamespace(master=["EAST", "WEST"], sats=np.array(sats)[vis], t_gpst=t0)
+    sigma = np.full((2, len(vis)), 0.01)
+    engine = SimpleNamespace(coordinates=monitor, stations=xyz, nav=nav)
+    out = CentreEngine._with_station_offsets(engine, None, vrs, sigma.copy())
+    llh = ecef_to_geodetic(xyz["EAST"])
+    u = np.asarray(tr.line_of_sight)[vis] @ enu_rotation(llh[0], llh[1]).T
+    want = 0.01 + (np.abs(u @ d) + K_CORRECTION_BOUND * np.sqrt(np.einsum("si,ij,sj->s", u, cov, u))) / K_CORRECTION_BOUND
+    assert np.allclose(out[0], want)
+    assert np.all(out[0] > 0.01 + np.abs(u @ d) / K_CORRECTION_BOUND - 1e-12)
+    assert np.array_equal(out[1], sigma[1])
+
+
 @pytest.mark.slow
-def test_engine_excludes_a_station_published_10_cm_off():
-    """The centre engine on simulated streams, WEST published 10 cm north of its antenna: a station-coordinates
-    alarm on the bus, and a VRS session at WEST is served from another station from then on."""
+def test_campaign_chain_excludes_a_station_published_8_cm_off():
+    """The scenario chain (the centre engine the campaign and `augnet up` share) on the campaign's station-fault
+    case, STA3 published (+4, -3, +6) cm off: STA3 alone is flagged during the warm-up, the alarm is on the bus,
+    and no train is served from STA3 once the trains start."""
     import json
 
-    from augnet.centre.engine import CentreEngine
-    from tests.centre.simdata import recorded_streams
+    from augnet.scenario.campaign import expand, load_campaign
+    from augnet.scenario.runner import Chain, WarmUpWorld
 
-    duration = 150
-    world, streams, stations = recorded_streams(duration)
-    published = dict(stations)
-    published["WEST"] = stations["WEST"] + enu_to_ecef(np.array([0.0, 0.10, 0.0]), stations["WEST"]).reshape(3)
-    engine = CentreEngine(published, world.t0, network_name="test")
-    lat, lon, h = ecef_to_geodetic(stations["WEST"] + enu_to_ecef(np.array([3000.0, 0.0, 0.0]),
-                                                                  stations["WEST"]).reshape(3))
-    engine.open_session("train", np.degrees(lat), np.degrees(lon), h, lambda b: None)
-    alarms, masters = [], []
-    now = 0.0
-    for e in range(duration):
-        for name in stations:
-            engine.feed(name, streams.epoch_bytes[name][e][1], now)
-        now += 1.0
-        for rep in engine.tick(now):
-            if rep.vrs is not None:
-                masters.append((rep.t_gpst, rep.vrs.master[0]))
-        for subject, payload in engine.drain_outbox():
-            if subject == "augnet.alarms.test":
-                a = json.loads(payload)
-                if a["kind"] == cm.KIND:
-                    alarms.append(a)
-    assert [(a["subject"], a["cleared"]) for a in alarms] == [("WEST", False)]
-    t_alarm = alarms[0]["t_gpst"]
-    assert any(m == "WEST" for t, m in masters if t < t_alarm)  # its nearest station served it before
-    after = [m for t, m in masters if t > t_alarm + 1.0]
-    assert after and "WEST" not in after
-    assert engine.last.network.vrs_excluded == {"WEST"}
+    campaign = load_campaign("issue15")
+    pair = next(p for p in expand(campaign) if p.case == "demo-station-faults")
+    sc = pair.scenario.model_copy(update={"duration_s": 20.0})
+    world = WarmUpWorld(sc, campaign.warm_up_s)
+    chain = Chain(world, sc, None)
+    masters, alarms = [], []
+    keep = chain._network_epoch
+
+    def spy(rep):
+        if rep.vrs is not None:
+            masters.append((rep.t_gpst - world.start_gpst, list(rep.vrs.master)))
+        keep(rep)
+
+    chain._network_epoch = spy
+    for blk in world.epochs():
+        chain.add_block(blk)
+        for subject, payload in chain.engine.drain_outbox():
+            a = json.loads(payload) if subject.startswith("augnet.alarms.") else {}
+            if a.get("kind") == cm.KIND:
+                alarms.append(a)
+    assert [(a["subject"], a["cleared"]) for a in alarms] == [("STA3", False)]
+    assert alarms[0]["t_gpst"] < world.start_gpst  # caught before the trains start
+    est = chain.engine.coordinates.offsets["STA3"].offset_enu_m
+    assert np.allclose(est[:2], (0.04, -0.03), atol=0.015)
+    served = [m for t, ms in masters if t >= 0.0 for m in ms]
+    assert served and "STA3" not in served
