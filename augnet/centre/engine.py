@@ -539,14 +539,16 @@ def correction_model_json(ne: NetworkEpoch) -> bytes:
     master), reference satellites, DD residuals (ionosphere on f1 and non-dispersive) of every station
     against the master, exclusions and per-baseline quality. Enough for a caster node elsewhere to
     interpolate for its own clients."""
+    # stations left out of VRS synthesis, named only when there are some (the model is otherwise as before)
+    out = {"vrs_excluded": sorted(ne.vrs_excluded)} if ne.vrs_excluded else {}
     return json.dumps({
         "t_gpst": ne.t_gpst, "master": ne.master, "stations": ne.stations,
         "station_en_m": [[round(float(v), 3) for v in row] for row in ne.station_en_m],
         "refs": ne.refs, "sats": [str(s) for s in ne.sats],
         "dd_iono_m": _nan_to_none(ne.dd_iono_m), "dd_trop_m": _nan_to_none(ne.dd_trop_m),
-        "excluded": sorted(ne.excluded), "present": ne.present, "vrs_excluded": sorted(ne.vrs_excluded),
+        "excluded": sorted(ne.excluded), "present": ne.present,
         "fixed_fraction": {k: round(v, 3) for k, v in ne.fixed_fraction().items()},
-        "misclosures": ne.misclosures,
+        "misclosures": ne.misclosures, **out,
     }, separators=(",", ":")).encode()
 
 
