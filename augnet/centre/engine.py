@@ -23,6 +23,7 @@ without corrections are not the policy's: they stay as synthesised.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 import logging
@@ -33,7 +34,9 @@ from typing import Callable
 import numpy as np
 
 from augnet.centre.baseline_config import BaselineConfig
-from augnet.centre.correction_bound import CorrectionBound, correction_residuals, ionosphere_level_ppm
+from augnet.centre.coordinate_monitor import StationCoordinateMonitor
+from augnet.centre.correction_bound import (K_CORRECTION_BOUND, CorrectionBound, correction_residuals,
+                                            ionosphere_level_ppm)
 from augnet.centre.ingest import EpochAligner, StationDecoder
 from augnet.centre.integrity import Alarm
 from augnet.centre.network import MEMBERSHIP_KIND, MembershipChange, NetworkEpoch, NetworkSolver
@@ -42,8 +45,8 @@ from augnet.centre.vrs import VrsEpoch, VrsPlan, synthesize
 from augnet.centre.vrs_admission import AdmissionBatch, AdmissionConfig, fixed_somewhere
 from augnet.centre.vrs_stream import VrsStreamEncoder
 from augnet.gnss.antex import AntexFile, read_antex
-from augnet.gnss.geometry import ecef_to_enu
-from augnet.gnss.ephemeris import Ephemeris, NavigationData
+from augnet.gnss.geometry import ecef_to_enu, ecef_to_geodetic, enu_rotation
+from augnet.gnss.ephemeris import Ephemeris, NavigationData, transit
 from augwire.errors import StreamRefused
 
 log = logging.getLogger(__name__)
@@ -124,6 +127,9 @@ class CentreEngine:
         # of a mountpoint that opted in (`set_session_bound`, decision 0281)
         estimate = correction_bound if estimate_correction_bound is None else estimate_correction_bound
         self.correction_bound = CorrectionBound() if estimate or correction_bound else None
+        # published station coordinates checked against the fixed network; a flagged station leaves VRS synthesis
+        # (coordinate_monitor.py, decision 0254)
+        self.coordinates = StationCoordinateMonitor()
         self.admission = AdmissionBatch(admission)  # per session: when newly corrected satellites enter its VRS
         self.sessions: dict[str, Session] = {}
         self._station_ids = itertools.count(FIRST_VRS_STATION_ID)
@@ -236,6 +242,7 @@ class CentreEngine:
         on), its pending epochs are dropped (observed at the old coordinates' solution)."""
         homed = self._sessions_mastered_by(name)
         change = self.network.move_station(name, xyz)
+        self.coordinates.forget(name)
         self.stations[name] = np.asarray(xyz, float).reshape(3)
         self.aligner.remove_station(name)
         self.aligner.add_station(name)
@@ -249,6 +256,7 @@ class CentreEngine:
 
     def _forget(self, name: str) -> None:
         self.stations.pop(name, None)
+        self.coordinates.forget(name)
         self.decoders.pop(name, None)
         self.aligner.remove_station(name)
         self._configured_antennas.pop(name, None)
@@ -349,6 +357,12 @@ class CentreEngine:
         if prev is not None and ids:
             vrs = self._serve(ids, prev, eps)
         ne = self.network.update(eps, self.nav)
+        try:
+            ne.alarms.extend(self.coordinates.update(ne, self.nav))
+        except Exception:  # noqa: BLE001 - the monitor failing must not stop the network: logged, no verdict
+            log.exception("station coordinates not checked at %s", t)
+        # flagged stations are neither masters nor interpolation nodes of the VRS made from this epoch
+        ne.vrs_excluded = self.coordinates.excluded & set(ne.stations)
         if self.correction_bound is not None and len(ne.stations):
             try:
                 self.correction_bound.update(ne.station_en_m, correction_residuals(ne.dd_iono_m, ne.dd_trop_m),
@@ -435,7 +449,33 @@ class CentreEngine:
         except Exception:  # noqa: BLE001 - as above
             log.exception("correction bound of uncorrected satellites not computed at %s", vrs.t_gpst)
             plain = np.full(sigma.shape, np.nan)
-        return np.where(vrs.corrected, sigma, plain), level
+        sigma = np.where(vrs.corrected, sigma, plain)
+        try:
+            sigma = self._with_station_offsets(ne, vrs, sigma)
+        except Exception:  # noqa: BLE001 - as above: those sessions' satellites are sent as "none"
+            log.exception("station offsets not added to the correction bound at %s", vrs.t_gpst)
+            sigma = np.full(sigma.shape, np.nan)
+        return sigma, level
+
+    def _with_station_offsets(self, ne: NetworkEpoch, vrs: VrsEpoch, sigma: np.ndarray) -> np.ndarray:
+        """The bound of sessions served by a suspect, not yet excluded station widened by its estimated offset.
+
+        A master published off by d puts u_j . d into satellite j's VRS observations (u: unit vector master ->
+        satellite); a bias b under sigma is overbounded by sigma + |b| / K, so each satellite's sigma grows by
+        (|u_j . d| + K sqrt(u_j' C u_j)) / K (decision 0254)."""
+        masters = np.asarray(vrs.master)
+        for s in set(masters.tolist()):
+            got = self.coordinates.unmodelled_offset(s)
+            if got is None or s not in self.stations:
+                continue
+            d, cov = got
+            xyz = self.stations[s]
+            llh = ecef_to_geodetic(xyz)
+            u = transit(self.nav, list(vrs.sats.astype(str)), xyz, vrs.t_gpst).line_of_sight @ enu_rotation(llh[0], llh[1]).T
+            extra = (np.abs(u @ d) + K_CORRECTION_BOUND * np.sqrt(np.einsum("si,ij,sj->s", u, cov, u))) / K_CORRECTION_BOUND
+            rows = masters == s
+            sigma[rows] = sigma[rows] + np.where(np.isfinite(extra), extra, np.nan)[None, :]
+        return sigma
 
     def _admit(self, ids: list[str], ne: NetworkEpoch, vrs: VrsEpoch) -> None:
         """Each session's admission decision on its VRS epoch, in place: in a network VRS the corrected satellites
@@ -499,6 +539,8 @@ def correction_model_json(ne: NetworkEpoch) -> bytes:
     master), reference satellites, DD residuals (ionosphere on f1 and non-dispersive) of every station
     against the master, exclusions and per-baseline quality. Enough for a caster node elsewhere to
     interpolate for its own clients."""
+    # stations left out of VRS synthesis, named only when there are some (the model is otherwise as before)
+    out = {"vrs_excluded": sorted(ne.vrs_excluded)} if ne.vrs_excluded else {}
     return json.dumps({
         "t_gpst": ne.t_gpst, "master": ne.master, "stations": ne.stations,
         "station_en_m": [[round(float(v), 3) for v in row] for row in ne.station_en_m],
@@ -506,7 +548,7 @@ def correction_model_json(ne: NetworkEpoch) -> bytes:
         "dd_iono_m": _nan_to_none(ne.dd_iono_m), "dd_trop_m": _nan_to_none(ne.dd_trop_m),
         "excluded": sorted(ne.excluded), "present": ne.present,
         "fixed_fraction": {k: round(v, 3) for k, v in ne.fixed_fraction().items()},
-        "misclosures": ne.misclosures,
+        "misclosures": ne.misclosures, **out,
     }, separators=(",", ":")).encode()
 
 

@@ -127,6 +127,9 @@ class NetworkEpoch:
     clocks: dict[str, float] = field(default_factory=dict)  # receiver clock estimates [s] per station
     excluded: set[str] = field(default_factory=set)  # satellites the integrity monitor took out
     alarms: list[Alarm] = field(default_factory=list)  # alarms raised this epoch
+    # stations left out of VRS synthesis (no master, no interpolation node): published coordinates flagged by the
+    # coordinate monitor (coordinate_monitor.py); set by the centre engine
+    vrs_excluded: set[str] = field(default_factory=set)
     # per modelled station: (sats (S,), (S, 2) phase-centre correction e . PCO - PCV [m]) of this epoch
     antenna_m: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
 

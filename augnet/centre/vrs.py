@@ -182,6 +182,8 @@ class VrsPlan:
         self.nav = nav
         self.t_tag = float(t_tag)
         self.clocks = net.clocks if clocks is None else clocks
+        # stations whose coordinates the network flagged serve no point (NetworkEpoch.vrs_excluded, decision 0254)
+        present = [s for s in present if s not in net.vrs_excluded]
         self.present = [i for i, s in enumerate(net.stations) if s in set(present)]
         self.present_names = frozenset(net.stations[i] for i in self.present)
         xyz = net.station_xyz_m
@@ -191,7 +193,8 @@ class VrsPlan:
         self.station_clk = {i: self.clocks.get(net.stations[i], 0.0) for i in self.present}
         self._station_geo: dict[int, tuple] = {}  # station row -> (G, TROP, EL) over the frame's columns
         self.net_col = {s: k for k, s in enumerate(net.sats)}
-        self.have_rows = [i for i in range(len(net.stations)) if net.stations[i] in net.present]
+        self.have_rows = [i for i in range(len(net.stations))
+                          if net.stations[i] in net.present and net.stations[i] not in net.vrs_excluded]
         # per point row
         self.keys: dict = {}
         self.points = np.zeros((0, 3))
@@ -313,7 +316,7 @@ def synthesize(net: NetworkEpoch, station_epochs: dict[str, StationEpoch], point
     is reused while its point is unchanged) only save time: the result is the same."""
     pts = np.atleast_2d(np.asarray(points_ecef_m, float))
     T = len(pts)
-    present_names = [s for s in net.stations if station_epochs.get(s) is not None]
+    present_names = [s for s in net.stations if station_epochs.get(s) is not None and s not in net.vrs_excluded]
     if not present_names:
         return None
     t_tag = float(station_epochs[present_names[0]].t_gpst)

@@ -40,7 +40,9 @@ CENTRE_DEVICE = DeviceConfig(0x0101, (0x1A2B3C4D, 0x5E6F7081), dataver=(1, 2), n
 RBC_DEVICE = DeviceConfig(0x0029, (0x311616DC, 0x07643EDE), dataver=(10, 11), name="rbc")
 LINK_TIMING = LinkTiming()  # 250 ms main cycle
 MAX_CORRECTION_AGE_S = 5.0  # network-rtk.md: corrections older than ~5 s lose the fix
-ALARM_CODES = {"station-down": AlarmCode.STATION_FAILED, "satellite-fault": AlarmCode.SATELLITE_EXCLUDED}
+# a station whose coordinates the network flagged serves no train, as a failed one (decision 0254)
+ALARM_CODES = {"station-down": AlarmCode.STATION_FAILED, "satellite-fault": AlarmCode.SATELLITE_EXCLUDED,
+               "station-coordinates": AlarmCode.STATION_FAILED}
 SEVERITY = {"info": Severity.INFO, "warning": Severity.WARNING, "critical": Severity.CRITICAL}
 RBC_ALARM_POLL_S = 1.0  # the RBC's watchdog alarms reach the alarm store within this (4 RSSP-I main cycles)
 
