@@ -265,7 +265,9 @@ def test_cli_interval_writes_the_rover_rate_between_network_epochs(shared_data, 
     """`--interval 1` on nl-network-2021 (30 s): the network's 19 epochs kept as they are, 1 s epochs between
     them, the header's interval and the summary saying how many were interpolated (decision 0222)."""
     plain, dense = tmp_path / "vrs30.obs", tmp_path / "vrs1.obs"
-    assert _cli(["vrs", "--record", str(shared_data / NL), "--at", "52.0,4.5,50", "--out", str(plain)]).exit_code == 0
+    r30 = _cli(["vrs", "--record", str(shared_data / NL), "--at", "52.0,4.5,50", "--out", str(plain)])
+    assert r30.exit_code == 0, r30.output
+    assert "VRS written at the network's 30 s" in r30.output and "--interval S" in r30.output
     r = _cli(["vrs", "--record", str(shared_data / NL), "--at", "52.0,4.5,50", "--out", str(dense), "--interval", "1"])
     assert r.exit_code == 0, r.output
     a, b = read_obs(plain), read_obs(dense)
@@ -276,6 +278,7 @@ def test_cli_interval_writes_the_rover_rate_between_network_epochs(shared_data, 
     assert np.array_equal(a.obs["L1C"], b.obs["L1C"][rows], equal_nan=True)  # network epochs unchanged
     n_between = len(b.times) - len(a.times)
     assert n_between > 0 and f"{n_between} of them interpolated in time" in r.output
+    assert "--interval S writes it at the rover's rate" not in r.output
     assert f"wrote {dense}: {len(b.times)} epochs" in r.output
 
 
