@@ -1,8 +1,9 @@
 """A post-processed VRS at the rover's rate: epochs between the network's epochs, interpolated in time.
 
 Reference stations often log at 30 s; a rover at 1 Hz then holds each VRS epoch up to 29 s, and everything that
-changes per satellite in that time reaches its double differences: the broadcast satellite clock and orbit errors,
-the absolute ionosphere and the wet troposphere as the satellite moves. That stale-base error is common to any
+changes per satellite in that time and no rover model follows reaches its double differences (the broadcast
+satellite clock and orbit errors, the ionosphere and the wet troposphere as the satellite moves; not separated
+here). That stale-base error is common to any
 base at 30 s, physical or virtual (issue 14, decision 0222: on catnet UPC1 its vertical part is 3.1 cm rms, the
 same to 0.4 cm on our VRS and on GARR, correlation 0.99), so a 30 s VRS can only be as good as its corrections
 and the age allow. A post-processing service knows the epoch after as well as the one before, so it writes the VRS
