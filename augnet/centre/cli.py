@@ -34,6 +34,10 @@ def vrs(
                                         help="first epoch to process (GPS time of the data's first day); the "
                                         "network starts cold there"),
     end: Optional[str] = typer.Option(None, "--end", metavar="HH:MM[:SS]", help="last epoch to process"),
+    interval: Optional[float] = typer.Option(None, "--interval", metavar="S",
+                                             help="write the VRS every S seconds (a 1 Hz rover: 1), epochs "
+                                             "between the network's interpolated in time (decision 0222); "
+                                             "default: the network's epochs"),
     opt: Optional[List[str]] = typer.Option(None, "--opt", metavar="NAME=VALUE",
                                             help="a network engine setting (docs/options/centre.md); repeatable"),
     admission: str = typer.Option("on", "--admission", metavar="on|off",
@@ -81,10 +85,11 @@ def vrs(
     try:
         result, lines = run_vrs(record, at, out, nav=nav, coords=coords, exclude=exclude or (), master=master,
                                 marker_name=name, progress=progress, config=config, antex=antex,
-                                start=start, end=end, admission=admission_config)
+                                start=start, end=end, admission=admission_config, interval=interval)
     except PostprocessError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(2)
     for line in lines:
         typer.echo(line)
-    typer.echo(f"wrote {out}: {len(result.epochs)} epochs")
+    written = result.epochs if result.written_epochs is None else result.written_epochs
+    typer.echo(f"wrote {out}: {len(written)} epochs")

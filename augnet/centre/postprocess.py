@@ -66,6 +66,7 @@ from augnet.centre.observations import StationEpoch, from_obsdata
 from augnet.centre.station_check import CheckResult, StationCheck
 from augnet.centre.vrs import geometry_many, synthesize
 from augnet.centre.vrs_admission import AdmissionConfig, AdmissionPolicy, fixed_somewhere
+from augnet.centre.vrs_densify import densify
 from augnet.centre.vrs_modes import ModeTally, select_modes, single_base_sigma_m
 from augnet.gnss.antex import NULL_ANTENNA, AntexError, ReceiverAntenna, antennas_for, read_antex
 from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
@@ -99,6 +100,9 @@ ECEF_MIN_COMPONENT_M = 1.0e4
 # An approximate position this close to the Earth's centre [m] is a header that does not know its position.
 MIN_STATION_RADIUS_M = 6.0e6
 VRS_MARKER_NAME = "VRS"
+# A VRS written at intervals longer than this [s] gets the summary's hint to write it at the rover's rate: 1 Hz is
+# what RTK rovers log (decision 0222: a 1 Hz rover on a 30 s base loses V95 3.5 -> 6.9 cm on catnet).
+HINT_INTERVAL_S = 1.0
 PROGRAM = "augnet vrs"
 LLI_LOSS_OF_LOCK = 1  # RINEX LLI bit 0
 
@@ -423,6 +427,12 @@ class VrsResult:
     # per written epoch's satellites: what the VRS carries and the centre's 1-sigma (vrs_modes.py)
     mode_tally: ModeTally = field(default_factory=ModeTally)
     epoch_sigma_m: list[float] = field(default_factory=list)  # per written epoch: its largest centre 1-sigma
+    # per written epoch: the VRS master and the receiver clock [s] its geometry was computed with (vrs_densify.py)
+    epoch_masters: list[str] = field(default_factory=list)
+    epoch_clock_s: list[float] = field(default_factory=list)
+    output_interval_s: float | None = None  # the written VRS's interval when densified (None: the network's epochs)
+    interpolated_epochs: int = 0  # epochs the written VRS has between the network's (vrs_densify.py)
+    written_epochs: list[StationEpoch] | None = None  # the epochs written when densified (else `epochs`)
 
     @property
     def antennas_modelled(self) -> list[str]:
@@ -519,6 +529,8 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
     misclosures = 0
     tally = ModeTally()
     epoch_sigma: list[float] = []
+    epoch_masters: list[str] = []
+    epoch_clock: list[float] = []
     check = StationCheck(stations, {s.name: (s.name_a, s.name_b) for s in net.solvers.values()}, inp.nav)
     checked: CheckResult | None = None
     for e, t in enumerate(times):
@@ -607,6 +619,8 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
         tally.add(sat_modes[0], sat_sigma[0])
         epoch_sigma.append(float(np.max(sat_sigma[0])) if np.isfinite(sat_sigma[0]).all() else float("nan"))
         masters[vmaster] += 1
+        epoch_masters.append(vmaster)
+        epoch_clock.append(float(clocks.get(vmaster, 0.0)))
         epochs.append(ep)
         modes.append(mode)
         n_corr.append(len(corrected))
@@ -618,7 +632,7 @@ def process(inp: NetworkInput, point_ecef_m, master: str | None = None, progress
                      misclosures=misclosures, seconds_wall=time.perf_counter() - t_wall,
                      station_check=checked if checked is not None else _judge_stations(check),
                      corrected_sets=corrected_sets, admission_moments=restarts, mode_tally=tally,
-                     epoch_sigma_m=epoch_sigma)
+                     epoch_sigma_m=epoch_sigma, epoch_masters=epoch_masters, epoch_clock_s=epoch_clock)
 
 
 def _judge_stations(check: StationCheck) -> CheckResult:
@@ -640,7 +654,7 @@ def _judge_stations(check: StationCheck) -> CheckResult:
 
 def to_obsdata(result: VrsResult, marker_name: str = VRS_MARKER_NAME) -> ObsData:
     """The VRS epochs as RINEX 3.04 observations (code, phase, C/N0 on each signal used)."""
-    eps = result.epochs
+    eps = result.epochs if result.written_epochs is None else result.written_epochs
     if not eps:
         raise PostprocessError("no VRS epoch to write: no epoch had a master station with satellites above the "
                                "point")
@@ -666,11 +680,15 @@ def to_obsdata(result: VrsResult, marker_name: str = VRS_MARKER_NAME) -> ObsData
         "receiver clock and ambiguities are the VRS master's",
     ]
     comments += _antenna_comments(result)
+    if result.interpolated_epochs:
+        comments += [f"{result.interpolated_epochs} epochs interpolated in time between"[:60],
+                     "network epochs (geometry at each epoch; vrs_densify.py)"]
     header = ObsHeader(program=PROGRAM, run_by="augnet", marker_name=marker_name, marker_type="NON_PHYSICAL",
                        observer="augnet", agency="augnet network RTK", receiver_type="AUGNET VRS",
                        receiver_version="1", antenna_type=_vrs_antenna_type(result),
                        approx_position_m=tuple(result.point_ecef_m),
-                       obs_types=obs_types, signal_strength_unit="DBHZ", interval_s=result.interval_s(),
+                       obs_types=obs_types, signal_strength_unit="DBHZ",
+                       interval_s=result.output_interval_s or result.interval_s(),
                        time_of_first_obs=eps[0].t_gpst, time_of_last_obs=eps[-1].t_gpst, time_system="GPS",
                        comments=comments)
     data = empty_obs(header, [ep.t_gpst for ep in eps], sats)
@@ -701,6 +719,20 @@ def _antenna_comments(result: VrsResult) -> list[str]:
     if result.antennas_modelled:
         return [f"antenna PCO/PCV modelled at {', '.join(result.antennas_modelled)} only"[:60]]
     return []
+
+
+def densify_result(result: VrsResult, nav: NavigationData, interval_s: float) -> VrsResult:
+    """Give the result epochs every `interval_s` between its network epochs (vrs_densify.py): what is written."""
+    if not interval_s > 0:
+        raise PostprocessError(f"--interval {interval_s!r}: not a positive number of seconds")
+    network_interval = result.interval_s()
+    if network_interval is None or interval_s >= network_interval:
+        return result
+    result.written_epochs, result.interpolated_epochs = densify(
+        result.epochs, result.epoch_clock_s, result.epoch_masters, result.point_ecef_m, nav, interval_s,
+        max_gap_s=network_interval)
+    result.output_interval_s = float(interval_s)
+    return result
 
 
 def write_vrs(result: VrsResult, path: str | os.PathLike, marker_name: str = VRS_MARKER_NAME) -> Path:
@@ -775,6 +807,14 @@ def summary_lines(result: VrsResult) -> list[str]:
                      f"{result.admission_moments}; corrected satellite-epochs not carried (waiting, or a system "
                      f"too thin): {waited}")
     lines.extend(result.mode_tally.lines())
+    network_interval = result.interval_s()
+    if not result.interpolated_epochs and network_interval is not None and network_interval > HINT_INTERVAL_S:
+        lines.append(f"VRS written at the network's {network_interval:g} s: a faster rover holds each epoch up to "
+                     f"{network_interval - 1:g} s; --interval S writes it at the rover's rate (decision 0222)")
+    if result.interpolated_epochs:
+        lines.append(f"VRS written every {result.output_interval_s:g} s: {len(result.written_epochs)} epochs, "
+                     f"{result.interpolated_epochs} of them interpolated in time between network epochs (no "
+                     "gaps bridged, no satellite across a loss of lock)")
     lines.append(f"VRS master station(s): " + ", ".join(f"{m} ({k} epochs)" for m, k in result.vrs_masters.most_common()))
     lines.append(f"processing time {result.seconds_wall:.1f} s")
     return lines
@@ -783,8 +823,11 @@ def summary_lines(result: VrsResult) -> list[str]:
 def run_vrs(record: str | os.PathLike, at: str, out: str | os.PathLike, nav=None, coords=None,
             exclude=(), master: str | None = None, marker_name: str = VRS_MARKER_NAME,
             progress=None, config: BaselineConfig | None = None, antex=None, start: str | None = None,
-            end: str | None = None, admission: AdmissionConfig | None = None) -> tuple[VrsResult, list[str]]:
-    """The whole post-processing: read, solve, synthesise, write. Returns the result and its summary."""
+            end: str | None = None, admission: AdmissionConfig | None = None,
+            interval: float | None = None) -> tuple[VrsResult, list[str]]:
+    """The whole post-processing: read, solve, synthesise, write. Returns the result and its summary. `interval`
+    [s]: write the VRS at that rate, epochs between the network's interpolated in time (a 1 Hz rover on a 30 s
+    network: decision 0222); None: at the network's epochs."""
     point = parse_point(at)
     start_s = parse_time_of_day(start, "--start") if start else None
     end_s = parse_time_of_day(end, "--end") if end else None
@@ -793,5 +836,7 @@ def run_vrs(record: str | os.PathLike, at: str, out: str | os.PathLike, nav=None
     inp = load_network(record, nav=nav, coords=coords, exclude=tuple(exclude), antex=antex)
     result = process(inp, point, master=master, progress=progress, config=config, start_s=start_s, end_s=end_s,
                      admission=admission)
+    if interval is not None:
+        densify_result(result, inp.nav, float(interval))
     write_vrs(result, out, marker_name)
     return result, summary_lines(result)

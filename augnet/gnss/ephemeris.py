@@ -24,6 +24,7 @@ evaluates all of them at once (any broadcastable time array), the Kepler equatio
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 from dataclasses import dataclass, field
@@ -433,6 +434,15 @@ class NavigationData:
             rows = np.flatnonzero((tb.sat == sat) & usable)
             # Latest toe first: argmin below returns the first of equal distances, the newer set.
             self._by_sat[str(sat)] = rows[np.argsort(-tb.toe_gpst[rows], kind="stable")]
+
+    def pinned(self, sats: Sequence[str], t_gpst: float) -> "NavigationData":
+        """The same data with each satellite held to the set selected at `t_gpst`, at any time: one model across an
+        interval that an upload crosses (a change of set steps the computed range by decimetres)."""
+        idx = self.select(sats, float(t_gpst))
+        out = copy.copy(self)
+        out._by_sat = {str(s): np.array([i]) for s, i in zip(sats, idx) if i >= 0}
+        out._max_dist = np.full_like(self._max_dist, np.inf)
+        return out
 
     def __len__(self) -> int:
         return len(self.table)

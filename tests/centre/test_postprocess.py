@@ -261,6 +261,27 @@ def test_cli_on_real_dutch_stations(shared_data, tmp_path):
     assert np.isfinite(vrs.obs["L1C"]).sum() >= 2 * 19
 
 
+def test_cli_interval_writes_the_rover_rate_between_network_epochs(shared_data, tmp_path):
+    """`--interval 1` on nl-network-2021 (30 s): the network's 19 epochs kept as they are, 1 s epochs between
+    them, the header's interval and the summary saying how many were interpolated (decision 0222)."""
+    plain, dense = tmp_path / "vrs30.obs", tmp_path / "vrs1.obs"
+    r30 = _cli(["vrs", "--record", str(shared_data / NL), "--at", "52.0,4.5,50", "--out", str(plain)])
+    assert r30.exit_code == 0, r30.output
+    assert "VRS written at the network's 30 s" in r30.output and "--interval S" in r30.output
+    r = _cli(["vrs", "--record", str(shared_data / NL), "--at", "52.0,4.5,50", "--out", str(dense), "--interval", "1"])
+    assert r.exit_code == 0, r.output
+    a, b = read_obs(plain), read_obs(dense)
+    assert b.header.interval_s == 1.0 and np.all(np.diff(b.times) == 1.0)
+    assert b.times[0] == a.times[0] and b.times[-1] == a.times[-1]
+    at = {float(x): i for i, x in enumerate(b.times)}
+    rows = [at[float(x)] for x in a.times]
+    assert np.array_equal(a.obs["L1C"], b.obs["L1C"][rows], equal_nan=True)  # network epochs unchanged
+    n_between = len(b.times) - len(a.times)
+    assert n_between > 0 and f"{n_between} of them interpolated in time" in r.output
+    assert "--interval S writes it at the rover's rate" not in r.output
+    assert f"wrote {dense}: {len(b.times)} epochs" in r.output
+
+
 def test_cli_errors_without_traceback(tmp_path):
     r = _cli(["vrs", "--record", str(tmp_path / "nope"), "--at", "52,4.5,0", "--out", str(tmp_path / "v.obs")])
     assert r.exit_code == 2 and "not a folder" in r.output and "Traceback" not in r.output

@@ -6,6 +6,8 @@ from the three stations, is the base of RTKLIB 2.4.3 rnx2rtkp kinematic (L1+L2, 
 15 degrees, broadcast ionosphere and Saastamoinen: its defaults for a short baseline, as the VRS sits at the
 rover); beside it the same rover and settings on GARR alone. Both also with RTKLIB's interpolation of the 30 s
 base to the 1 Hz rover (`misc-timeinterp`), which removes the growth of the error with the correction's age.
+And our VRS written at the rover's rate (`interval=1`: its epochs between the 30 s network epochs interpolated at
+the centre, decision 0222), what a post-processing service gives a 1 Hz rover, beside GARR's own 30 s file.
 
 Truth. UPC1's and UPC2's published positions are unknown (their headers are good to ~0.5 m), so each is
 established from the data: RTKLIB static, fix-and-hold, over the hour against GARR's header position (ICC 2006.0
@@ -56,6 +58,12 @@ MIN_NETWORK_SHARE = 0.9
 UPC1_TRUTH_RECORDED = np.array([4789013.0854, 176610.1611, 4195034.8637])
 UPC1_TRUTH_SAAS_RECORDED = np.array([4789013.1051, 176610.1545, 4195034.8712])
 TRUTH_REPRODUCED_M = 0.005
+# The VRS written at the rover's rate (1 Hz), its epochs between the 30 s network epochs interpolated (decision 0222).
+ROVER_INTERVAL_S = 1.0
+VRS_RATE = "VRS-1s"
+# The stale-base vertical error (RTKLIB defaults minus timeinterp, the same base) is common to any 30 s base:
+# measured correlation 0.99 between our 30 s VRS and GARR (decision 0222).
+STALE_ERROR_CORRELATION = 0.9
 GF_JUMP_M = 0.05  # a geometry-free step this large between 30 s epochs ends an arc (a slip)
 GF_MIN_ARC = 10  # epochs
 
@@ -168,18 +176,23 @@ def upc(tmp_path_factory, shared_data):
     truth = {r: _static_truth(exe, d, rovers[r], net / f"{NEAREST}0770.10o", nav) for r in ROVERS}
     truth_saas = {r: _static_truth(exe, d, rovers[r], net / f"{NEAREST}0770.10o", nav, STATIC_SAAS, "saas")
                   for r in ROVERS}
-    vrs_path = d / "vrs-upc1.obs"
-    result, summary = run_vrs(net, ",".join(f"{v:.4f}" for v in truth["UPC1"]), vrs_path, start=START, end=END)
-    figures, figures_saas = {}, {}
+    vrs_path, vrs_rate_path = d / "vrs-upc1.obs", d / "vrs-upc1-1s.obs"
+    at = ",".join(f"{v:.4f}" for v in truth["UPC1"])
+    result, summary = run_vrs(net, at, vrs_path, start=START, end=END)
+    _, summary_rate = run_vrs(net, at, vrs_rate_path, start=START, end=END, interval=ROVER_INTERVAL_S)
+    figures, figures_saas, sols = {}, {}, {}
+    bases = (("VRS", vrs_path), (VRS_RATE, vrs_rate_path), (NEAREST, net / f"{NEAREST}0770.10o"))
     for r in ROVERS:
         for setting, conf in SETTINGS.items():
-            for base, path in (("VRS", vrs_path), (NEAREST, net / f"{NEAREST}0770.10o")):
+            for base, path in bases:
                 sol = _rnx2rtkp(exe, conf, d, f"{r}-{base}-{setting}", rovers[r], path, nav)
+                sols[(r, setting, base)] = sol
                 figures[(r, setting, base)] = _figures(sol, truth[r])
                 figures_saas[(r, setting, base)] = _figures(sol, truth_saas[r])
     gf = {base: dd_geometry_free_scatter_m(rovers["UPC1"], path)
           for base, path in (("VRS", vrs_path), (NEAREST, net / f"{NEAREST}0770.10o"))}
     print("\n" + "\n".join(summary))
+    print(next(line for line in summary_rate if line.startswith("VRS written every")))
     for r in ROVERS:
         print(f"{r} truth (RTKLIB static vs {NEAREST}): {np.round(truth[r], 4)}")
     for (r, setting, base), f in figures.items():
@@ -189,7 +202,8 @@ def upc(tmp_path_factory, shared_data):
     print(f"UPC1 DD geometry-free scatter: on VRS {gf['VRS'] * 1e3:.1f} mm, on {NEAREST} {gf[NEAREST] * 1e3:.1f} mm")
     hour = np.array([ep.t_gpst for ep in result.epochs]) % 86400.0 >= 5 * 3600.0
     share = float(np.mean(np.array(result.epoch_mode)[hour] == "network"))
-    return {"result": result, "truth": truth, "truth_saas": truth_saas, "figures": figures, "gf": gf, "network_share_hour": share}
+    return {"result": result, "truth": truth, "truth_saas": truth_saas, "figures": figures, "gf": gf,
+            "network_share_hour": share, "sols": sols}
 
 
 def test_upc1_truth_is_reproduced(upc):
@@ -220,23 +234,59 @@ def test_with_the_base_interpolated_no_fix_is_off_by_10_cm(upc, rover):
     assert vrs["off_10cm"] == 0, vrs
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "issue 14 asks for ours at least as good as GARR alone on every figure; measured (2026-12-03) against the "
-    "troposphere-estimated truth, UPC1 / UPC2: fixed 3,600 on both; H95 3.78 vs 4.04 / 3.80 vs 4.07 cm; off by "
-    "> 10 cm 30 vs 50 / 21 vs 46; with timeinterp H95 2.05 vs 2.44, V95 4.13 vs 5.98 cm, 0 vs 0 off; but V95 "
-    "with RTKLIB's defaults 6.95 vs 6.68 / 6.82 vs 6.67 cm (30 s corrections 15-30 s old dominate both)"))
-def test_the_vrs_is_at_least_as_good_as_garr_on_every_figure(upc):
+def _worse_than_nearest(figures, base):
     worse = []
-    for (rover, setting, base), vrs in upc["figures"].items():
-        if base != "VRS":
+    for (rover, setting, b), vrs in figures.items():
+        if b != base:
             continue
-        near = upc["figures"][(rover, setting, NEAREST)]
+        near = figures[(rover, setting, NEAREST)]
         if (vrs["fixed"] < near["fixed"] or vrs["h95_m"] > near["h95_m"] or vrs["v95_m"] > near["v95_m"]
                 or vrs["off_10cm"] > near["off_10cm"]):
             worse.append(f"{rover} {setting}: fixed {vrs['fixed']} vs {near['fixed']}, H95 {vrs['h95_m']:.4f} vs "
                          f"{near['h95_m']:.4f} m, V95 {vrs['v95_m']:.4f} vs {near['v95_m']:.4f} m, "
                          f"off {vrs['off_10cm']} vs {near['off_10cm']}")
+    return worse
+
+
+def test_the_vrs_at_the_rovers_rate_is_at_least_as_good_as_garr_on_every_figure(upc):
+    """Issue 14's must-show with the VRS a post-processing service gives a 1 Hz rover: at 1 s, its epochs between
+    the network's interpolated (decision 0222), against GARR's own 30 s file, both with RTKLIB's defaults and with
+    its interpolation of the base (which on GARR does what the VRS does at the centre)."""
+    worse = _worse_than_nearest(upc["figures"], VRS_RATE)
     assert not worse, worse
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
+    "a 30 s VRS against GARR's 30 s file: measured (2026-12-04) against the troposphere-estimated truth, UPC1 / UPC2: "
+    "fixed 3,600 on both; H95 3.78 vs 4.04 / 3.80 vs 4.07 cm; off by > 10 cm 30 vs 50 / 21 vs 46; with timeinterp "
+    "H95 2.05 vs 2.44, V95 4.13 vs 5.98 cm, 0 vs 0 off; but V95 with RTKLIB's defaults 6.95 vs 6.68 / 6.82 vs "
+    "6.67 cm. The stale-base error dominates both and is common (see the next test); it is skewed (mean -1.1 cm "
+    "up) and GARR's own +1.7 cm vertical offset happens to centre it, while ours has none: decision 0222"))
+def test_the_vrs_is_at_least_as_good_as_garr_on_every_figure(upc):
+    worse = _worse_than_nearest(upc["figures"], "VRS")
+    assert not worse, worse
+
+
+@pytest.mark.parametrize("rover", ROVERS)
+def test_the_stale_base_error_is_common_and_the_vrs_is_closer_to_the_truth_in_it(upc, rover):
+    """Why a 30 s VRS loses V95 to GARR with RTKLIB's defaults (decision 0222): what holding a 30 s base adds to
+    the height (defaults minus timeinterp, per epoch) is the same on our VRS and on GARR (the satellites' clock,
+    orbit and atmosphere moving in those seconds, not anything at the base), and with it included our VRS is still
+    nearer the truth in rms; only the 95th percentile, on a skewed error, favours GARR's offset."""
+    def up(base, setting):
+        t, xyz, q = upc["sols"][(rover, setting, base)]
+        truth = upc["truth"][rover]
+        return t, ecef_to_enu(xyz - truth, truth)[:, 2]
+
+    stale = {}
+    for base in ("VRS", NEAREST):
+        t_d, u_d = up(base, "defaults")
+        t_i, u_i = up(base, "timeinterp")
+        assert np.array_equal(t_d, t_i)
+        stale[base] = u_d - u_i
+    assert np.corrcoef(stale["VRS"], stale[NEAREST])[0, 1] > STALE_ERROR_CORRELATION
+    rms = {base: float(np.sqrt(np.mean(up(base, "defaults")[1] ** 2))) for base in ("VRS", NEAREST)}
+    assert rms["VRS"] < rms[NEAREST], rms
 
 
 # --- held-out stations: each network station as the rover of the other two ------------------------------------

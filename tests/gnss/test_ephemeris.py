@@ -147,6 +147,22 @@ def test_selection_rules(nav2023, nav2024):
     assert nav.select(["G01", "E07", "C06"], times).shape == (6, 3)
 
 
+def test_pinned_holds_each_satellite_to_the_set_selected_then(nav2023):
+    """`NavigationData.pinned`: across a later toe the original set stays in use (vrs_densify.py), the original
+    data are untouched, and a satellite without a set at that time has none."""
+    nav = NavigationData(nav2023)
+    g14 = sorted((e for e in nav2023 if e.sat == "G14" and e.health == 0), key=lambda e: e.toe_gpst)
+    a, b = next((a, b) for a, b in zip(g14, g14[1:]) if b.toe_gpst - a.toe_gpst == 7200.0)
+    mid = 0.5 * (a.toe_gpst + b.toe_gpst)
+    held = nav.pinned(["G14", "G99"], mid - 1.0)
+    assert held.table.records[held.select(["G14"], mid + 10.0)[0]] == a
+    assert nav.table.records[nav.select(["G14"], mid + 10.0)[0]] == b
+    assert held.select(["G99"], mid)[0] == -1
+    ta = transit(held, ["G14"], geodetic_deg_to_ecef(52.0, 4.5, 0.0), mid + 10.0)
+    tb = transit(nav, ["G14"], geodetic_deg_to_ecef(52.0, 4.5, 0.0), mid + 10.0)
+    assert np.isfinite(ta.range_m).all() and not np.array_equal(ta.range_m, tb.range_m)
+
+
 def test_group_delays():
     from augnet.gnss.signals import FREQ_E5B_HZ, FREQ_L1_HZ, FREQ_L2_HZ, FREQ_L5_HZ
 
