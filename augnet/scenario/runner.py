@@ -588,8 +588,8 @@ class Chain:
         """Every method's along-track position at t from this epoch's map-matched fix and odometer reading."""
         fix = None
         if (m is not None and sol.status != Status.NONE and np.all(np.isfinite(sol.position_m))
-                and math.isfinite(m.along_pl_m) and m.along_pl_m > 0):
-            fix = AlongTrackFix(t, m.km * 1000.0, m.along_pl_m / gaussian_k(tr.unit.integrity_risk))
+                and math.isfinite(m.along_sigma_m) and m.along_sigma_m > 0):
+            fix = AlongTrackFix(t, m.km * 1000.0, m.along_sigma_m)
         odo = self.odometers.sample(tr.log.id, epoch, t)
         for method, fusion in tr.fusions.items():
             tr.log.fused[method].append(fusion.step(t, odo, fix))
@@ -611,7 +611,7 @@ class Chain:
             return
         prev = fused[-2]
         dt = now.time - prev.time
-        sigma = now.pl_m / tr.timer.k
+        sigma = now.sigma_m
         if dt <= 0 or not math.isfinite(sigma):
             return
         speed = (now.position_m - prev.position_m) / dt
