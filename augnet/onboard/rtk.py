@@ -655,6 +655,9 @@ class RtkFilter:
         sysmask = np.isin(np.array([s[0] for s in common]), list(opt.systems))
         common, ri, bi = common[sysmask], ri[sysmask], bi[sysmask]
         rslip = self.rover_slips.detect(rover)
+        # the rover's phases jumped by the same metres on every frequency against their Dopplers: a range
+        # fault in space (cycleslip.py), left out and held like the code-and-phase jump (decision 0253)
+        self.range_faults.update({str(s): rover.time for s in rover.sats[self.rover_slips.range_jump]})
         bslip = self.base_slips.detect(base)
         nf = min(opt.n_slots, rover.n_slots, base.n_slots)
         if len(common) == 0:
