@@ -217,6 +217,8 @@ class TrainLog:
     # the centre's 4001 correction-error sigma on each axis in those PLs [m] (0: none received, inf: unbounded)
     correction_along_m: list[float] = field(default_factory=list)
     correction_cross_m: list[float] = field(default_factory=list)
+    along_sigma_m: list[float] = field(default_factory=list)  # the 1-sigma each PL was made from [m]
+    cross_sigma_m: list[float] = field(default_factory=list)
     message: list[str] = field(default_factory=list)
     truth_position: list[np.ndarray] = field(default_factory=list)  # truth, ECEF
     truth_km: list[float] = field(default_factory=list)  # truth chainage of the antenna
@@ -559,6 +561,8 @@ class Chain:
         log.cross_pl_m.append(m.cross_pl_m if m is not None else math.inf)
         log.correction_along_m.append(m.correction_along_m if m is not None else 0.0)
         log.correction_cross_m.append(m.correction_cross_m if m is not None else 0.0)
+        log.along_sigma_m.append(m.along_sigma_m if m is not None else math.inf)
+        log.cross_sigma_m.append(m.cross_sigma_m if m is not None else math.inf)
         log.message.append(sol.message)
         log.truth_position.append(blk.rx_ecef[e, tr.row].copy())
         rx = self.world.receivers[tr.row]
