@@ -14,7 +14,8 @@ common in proportion to both distances:
 (r: the model's variance rate [m^2/s], s: its scale sigma, D: distances travelled, q: metres per pulse;
 `augnet.onboard.odometer`). Methods, one `AlongTrackFusion` each, compared side by side in a run:
 
-* `gnss_raim`: this epoch's fix alone, PL = K sigma; nothing without a fix (tunnels);
+* `gnss_raim`: this epoch's fix alone, PL = K sigma (or the fault modes' b_i + K_md sigma when larger, as for
+  every method's PL: decisions 0250, 0253); nothing without a fix (tunnels);
 * `median`: the median of the window's estimates;
 * `weighted_median`: weights 1 / C_hh;
 * `residual_weighted_median`: weights 1 / C_hh, further down-weighted (Huber) by each estimate's normalised
@@ -42,6 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from augnet.onboard.integrity_allocation import DEFAULT_ALLOCATION
 from augnet.onboard.odometer import OdometerModel, OdometerSample, OdometerError, check_sample
 from augnet.onboard.trackmap import DEFAULT_INTEGRITY_RISK, gaussian_k
 
@@ -81,6 +83,9 @@ class FusionSettings:
     lockout_rejections: int = LOCKOUT_REJECTIONS
     huber_c: float = HUBER_C
     direction: int = 1  # +1: forward pulses increase the chainage (the train's orientation on its journey)
+    # PL = max(K sigma, b_i + K_md sigma) over decision 0250's fault modes (satellite, wrong correction,
+    # odometer slide): a bias the checks let through shifts every estimate alike (decision 0253)
+    fault_terms: bool = True
 
     def __post_init__(self):
         if self.direction not in (1, -1):
@@ -107,6 +112,7 @@ class FusedPosition:
     rejected: bool  # this epoch's fix failed the residual check
     odometry_only: bool  # no fix entered this epoch: the position is carried by odometry
     from_fix: bool = False  # a window method output this epoch's checked fix (it bounded tighter than the median)
+    sigma_m: float = math.inf  # the 1-sigma the PL was made from [m] (inf when none)
 
 
 @dataclass(frozen=True)
@@ -174,6 +180,13 @@ class AlongTrackFusion:
         r[k] = 0.0
         return w * np.minimum(1.0, self.settings.huber_c / np.maximum(r, 1e-12))
 
+    def bound(self, sigma_m: float) -> float:
+        """The PL [m] of an estimate with 1-sigma `sigma_m`: K sigma, or the fault modes' bound if larger."""
+        pl = self.k * sigma_m
+        if self.settings.fault_terms:
+            pl = max(pl, DEFAULT_ALLOCATION.fault_bound(sigma_m, "along"))
+        return pl
+
     # --- one epoch --------------------------------------------------------------------------------
 
     def step(self, now: float, odometer: OdometerSample | None, fix: AlongTrackFix | None) -> FusedPosition:
@@ -221,15 +234,18 @@ class AlongTrackFusion:
         w = self._weights(x, cov)
         k = weighted_median(x, w)
         sigma = np.sqrt(np.diag(cov))
-        pl = self.k * float(sigma[weighted_median(sigma, w)])  # the median bound (module docstring)
-        from_fix = bool(entered and self.k * sigma[-1] < pl)
+        sel = float(sigma[weighted_median(sigma, w)])
+        pl = self.bound(sel)  # the median bound (module docstring)
+        from_fix = bool(entered and self.bound(float(sigma[-1])) < pl)
         if from_fix:
-            k, pl = len(x) - 1, self.k * float(sigma[-1])  # this epoch's checked fix bounds tighter on its own
-        self._last = (now, odometer.pulses, float(x[k]), (pl / self.k) ** 2)
+            # this epoch's checked fix bounds tighter on its own
+            k, sel = len(x) - 1, float(sigma[-1])
+            pl = self.bound(sel)
+        self._last = (now, odometer.pulses, float(x[k]), sel ** 2)
         if rejected:
             # Either the fix or the carried window is faulty (one fault at a time): bound both cases.
-            pl = max(pl, abs(float(x[k]) - fix.position_m) + self.k * fix.sigma_m)
-        return self._output(now, float(x[k]), pl, len(x), rejected, not entered, lockout, from_fix)
+            pl = max(pl, abs(float(x[k]) - fix.position_m) + self.bound(fix.sigma_m))
+        return self._output(now, float(x[k]), pl, len(x), rejected, not entered, lockout, from_fix, sel)
 
     def _passes(self, now: float, odometer: OdometerSample | None, fix: AlongTrackFix) -> bool:
         if self._last is None or odometer is None:
@@ -243,10 +259,13 @@ class AlongTrackFusion:
     def _gnss_alone(self, now: float, fix: AlongTrackFix | None) -> FusedPosition:
         if fix is None:
             return self._output(now, math.nan, math.inf, 0, False, True, False)
-        return self._output(now, fix.position_m, self.k * fix.sigma_m, 1, False, False, False)
+        return self._output(now, fix.position_m, self.bound(fix.sigma_m), 1, False, False, False,
+                            sigma_m=fix.sigma_m)
 
-    def _output(self, now, x, pl, n, rejected, odometry_only, lockout, from_fix=False) -> FusedPosition:
+    def _output(self, now, x, pl, n, rejected, odometry_only, lockout, from_fix=False,
+                sigma_m=math.inf) -> FusedPosition:
         available = bool(math.isfinite(x) and pl < self.settings.alert_limit_m)
         alarm = bool(lockout or (self._was_available and not available))
         self._was_available = available
-        return FusedPosition(now, self.method, x, pl, available, alarm, n, rejected, odometry_only, from_fix)
+        return FusedPosition(now, self.method, x, pl, available, alarm, n, rejected, odometry_only, from_fix,
+                             sigma_m)

@@ -8,6 +8,11 @@ Three independent tests, each cheap and each catching what the others miss:
   - phase against Doppler: the phase change over the interval must match the integrated Doppler;
     the receiver-clock part is common to all satellites, so the median discrepancy is removed.
 A satellite not seen for longer than a gap limit is treated as slipped (its ambiguity is re-found).
+
+A jump that every slot's Doppler test sees and the geometry-free test does not (no loss-of-lock flag) is
+non-dispersive, the same in metres on both frequencies: a jump of the range itself (a satellite clock step,
+an orbit fault), not of the ambiguities (a slip pair with n1 lambda1 = n2 lambda2 needs 77/60 cycles on GPS
+L1/L2, 14.7 m). `range_jump` says which satellites of the last epoch jumped so (issue 15, decision 0253).
 """
 
 from __future__ import annotations
@@ -50,6 +55,7 @@ class SlipDetector:
         self.max_gap_s = max_gap_s
         self.gf_threshold_m = gf_threshold_m
         self.gf_drift_m_s = gf_drift_m_s
+        self.range_jump = np.zeros(0, bool)  # (N,) per satellite of the last epoch detected (module docstring)
         self.reset()
 
     def reset(self) -> None:
@@ -109,12 +115,18 @@ class SlipDetector:
         gf_slip = jump > self.gf_threshold_m + self.gf_drift_m_s * dt_all
         slip |= gf_slip[:, None] & has_phase
         lim = DOPPLER_SLIP_THRESHOLD_CYC + DOPPLER_DRIFT_CYC_S * dt_all
+        lli = ((obs.lli & LLI_SLIP) != 0).any(axis=1)
+        dop_flag = np.zeros((n, nf), bool)
         for f in range(nf):
             col = dop_disc[:, f]
             ok = np.isfinite(col)
             if np.count_nonzero(ok) >= 2:
                 common = np.median(col[ok])
-                slip[:, f] |= ok & (np.abs(col - common) > lim)
+                dop_flag[:, f] = ok & (np.abs(col - common) > lim)
+        slip |= dop_flag
+        # every slot's phase ran away from its Doppler by the same metres (GF steady): the range jumped
+        self.range_jump = (cont & ~lli & np.isfinite(jump) & ~gf_slip & (has_phase.sum(axis=1) >= 2)
+                           & np.all(dop_flag | ~has_phase, axis=1))
         upd = rows[has_phase.any(axis=1)]
         keep = has_phase.any(axis=1)
         self._has[upd] = True

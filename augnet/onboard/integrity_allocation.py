@@ -131,6 +131,24 @@ class IntegrityAllocation:
             return None
         return one_sided_k(r / mode.prior_per_hour)
 
+    def fault_bound(self, sigma_m: float, axis: str, modes=None) -> float:
+        """The largest per-fault bound b_i + K_md,i sigma on `axis` over the covered modes [m] (0: none);
+        `sigma_m` is the whole 1-sigma (correction bound already in); `modes`: names to consider (None: all).
+        PL = max(K_ff sigma, this)."""
+        if axis not in ("along", "cross"):
+            raise ValueError("axis must be 'along' or 'cross'")
+        if not math.isfinite(sigma_m):
+            return math.inf
+        out = 0.0
+        for mode in self.faults:
+            if modes is not None and mode.name not in modes:
+                continue
+            k = self.k_missed_detection(mode)
+            bias = mode.bias_along_m if axis == "along" else mode.bias_cross_m
+            if k is not None and bias > 0.0:
+                out = max(out, bias + k * sigma_m)
+        return out
+
     def protection_level(self, sigma_m: float, axis: str, correction_sigma_m: float = 0.0) -> float:
         """Protection level [m] on `axis` ('along' or 'cross') for a 1-sigma error `sigma_m`, inflated by the
         centre's correction-error overbound sigma on that axis (`correction_sigma_on_axis`; 0: none sent)."""
@@ -141,13 +159,7 @@ class IntegrityAllocation:
         if correction_sigma_m < 0.0:
             raise ValueError("correction sigma must be non-negative")
         sigma_m = math.hypot(sigma_m, correction_sigma_m)  # independent of the receiver's own errors
-        pl = self.k_fault_free * sigma_m
-        for mode in self.faults:
-            k = self.k_missed_detection(mode)
-            bias = mode.bias_along_m if axis == "along" else mode.bias_cross_m
-            if k is not None and bias > 0.0:
-                pl = max(pl, bias + k * sigma_m)
-        return pl
+        return max(self.k_fault_free * sigma_m, self.fault_bound(sigma_m, axis))
 
 
 @dataclass(frozen=True)
@@ -191,5 +203,8 @@ def axis_availability(sigma_along_m: float, sigma_cross_m: float,
 
 
 DEFAULT_ALLOCATION = IntegrityAllocation()
+# The fault modes a GNSS fix alone can carry (the odometer slide is the fusion's): what `trackmap.match`
+# bounds a fix's PL by, with the shares of the whole allocation (decision 0253 applies decision 0250's terms).
+GNSS_FAULT_MODES = ("satellite", "wrong correction")
 # Per-decision fault-free integrity risk the onboard core uses for K (replaces the per-epoch 1e-7).
 ALLOCATED_PER_DECISION_RISK = DEFAULT_ALLOCATION.per_decision_risk

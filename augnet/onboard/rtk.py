@@ -121,6 +121,21 @@ ROVER_SPP_STEPS = 2
 MAX_CODE_INNOVATION_M = 30.0
 PHASE_INNOVATION_SIGMAS = 6.0
 PHASE_INNOVATION_MIN_M = 0.10
+# Range fault (issue 15, decision 0253): a DD whose code innovation is beyond this many code sigmas and whose
+# phase innovation agrees with it within as many is a jump of the range, not of the ambiguity: a
+# satellite clock step or an orbit fault seen between the base epoch and the rover epoch (the VRS epoch
+# used is ~1 s older). A slip moves the phase alone; re-initialising the ambiguity from code, as for a slip,
+# leaves the jump in the row, and the filter took it in (100 ns step: float bias ~1 m, decision 0252).
+RANGE_FAULT_CODE_SIGMAS = 4.0
+# A white-noise position linearised at the last solution carried by its velocity (`_predicted_position`) is
+# that good: a train accelerates or brakes at most ~1.5 m/s^2 (emergency braking; 2 taken) and the Doppler
+# velocity is good to ~5 cm/s, so the prediction is off by at most 0.5 a dt^2 + dv dt [m], taken as its sigma.
+PREDICTION_ACCEL_M_S2 = 2.0
+PREDICTION_VELOCITY_SIGMA_M_S = 0.05
+# The satellite then stays out of the RTK for this long [s]: the centre's integrity monitor excludes a
+# satellite fault within an epoch and the VRS omits it within its latency (~1-2 s); the hold covers that
+# with margin, and after it a satellite the VRS still carries (a local event) re-enters with a new ambiguity.
+RANGE_FAULT_HOLD_S = 30.0
 # Phase observations of a satellite not updated for more epochs than this lose their ambiguity.
 MAX_AMBIGUITY_OUTAGE_EPOCHS = 5
 # Fix-and-hold: after this many consecutive fixes the integers are fed back into the float filter as
@@ -362,6 +377,7 @@ class RtkFilter:
         self._base_checked_time = math.nan
         self._base_ok = True
         self._base_msg = ""
+        self.range_faults: dict[str, float] = {}  # satellite -> when its range jumped (held out of the RTK)
 
     # -----------------------------------------------------------------------------------------
     # state bookkeeping
@@ -589,15 +605,25 @@ class RtkFilter:
         x_rov = self._predicted_position(t)
         sd = self._single_differences(ep, x_rov)
         ok, var_sd = self._usable(ep, sd)
+        self._hold_range_faults(t, ep.sats, ok)
         sigma0 = self._switch_ionosphere(baseline_m)
         self._add_states(ep, ok, sd.el, sigma0)
         if opt.iono_prior == "learned" and self.iono_active:
             self._tighten_ionosphere(sigma0, sd.el, ep.sats)
         groups = choose_groups(opt.systems, ep.sys_, ok, sd.el, ep.nf, self._amb_variances(ep.sats, ok))
-        n_sat_used = len({k for g in groups for k in g.sats})
         if not groups:
             return self._single(t, spp, "too few common satellites above the mask", age)
         dd = self._dd_index(groups, ep.sats)
+        faulty = self._range_faulty(ep, dd, sd, x_rov, var_sd)
+        if faulty:
+            # a satellite whose range jumped: out of this epoch's rows (and held), before any state takes it in
+            self.range_faults.update({sat: t for sat in faulty})
+            self._hold_range_faults(t, ep.sats, ok)
+            groups = choose_groups(opt.systems, ep.sys_, ok, sd.el, ep.nf, self._amb_variances(ep.sats, ok))
+            if not groups:
+                return self._single(t, spp, "too few common satellites above the mask", age)
+            dd = self._dd_index(groups, ep.sats)
+        n_sat_used = len({k for g in groups for k in g.sats})
         dd, rows, keep = self._screened_rows(ep, dd, groups, sd, x_rov, var_sd)
         x_rov, sd, rows = self._at_phase_position(ep, dd, rows, sd, x_rov, var_sd, keep)
         x_rov, sd = self._iterated_update(ep, dd, rows, sd, x_rov, var_sd, keep)
@@ -629,6 +655,9 @@ class RtkFilter:
         sysmask = np.isin(np.array([s[0] for s in common]), list(opt.systems))
         common, ri, bi = common[sysmask], ri[sysmask], bi[sysmask]
         rslip = self.rover_slips.detect(rover)
+        # the rover's phases jumped by the same metres on every frequency against their Dopplers: a range
+        # fault in space (cycleslip.py), left out and held like the code-and-phase jump (decision 0253)
+        self.range_faults.update({str(s): rover.time for s in rover.sats[self.rover_slips.range_jump]})
         bslip = self.base_slips.detect(base)
         nf = min(opt.n_slots, rover.n_slots, base.n_slots)
         if len(common) == 0:
@@ -767,6 +796,40 @@ class RtkFilter:
         """The DD rows at the SDs' linearisation point, those of `keep` only (None: all)."""
         return dd_rows(dd, sd, ep.wl, ep.mu, var_sd, self.x, self._code_phase_ratio(), self._age_var).select(keep)
 
+    def _hold_range_faults(self, t: float, sats: list[str], ok: np.ndarray) -> None:
+        """Satellites whose range jumped within RANGE_FAULT_HOLD_S are not usable (`ok` cleared in place)."""
+        for sat, t_fault in list(self.range_faults.items()):
+            if not t - t_fault <= RANGE_FAULT_HOLD_S:
+                del self.range_faults[sat]
+            elif sat in sats:
+                ok[sats.index(sat), :] = False
+
+    def _range_faulty(self, ep: _CommonEpoch, dd: DDIndex, sd: SingleDifferences, x_rov: np.ndarray,
+                      var_sd: np.ndarray) -> set[str]:
+        """Satellites whose range jumped against the prior state: a DD whose code innovation is beyond
+        RANGE_FAULT_CODE_SIGMAS code sigmas and whose phase innovation agrees with it within as many (a slip
+        moves the phase alone, code multipath the code alone; an ambiguity the slip detectors restarted from
+        code carries the code's innovation, so the test holds for it too). Attributed like slips (the row's
+        satellite, or the group's reference when half its rows jump together)."""
+        rows = self._rows(ep, dd, sd, var_sd, None).about(self.x[:3], x_rov)
+        m = len(dd.k)
+        Hc = rows.H[m:]
+        dt = self._prediction_dt(ep.t)
+        if dt is None:
+            S_code = np.einsum("ij,ij->i", Hc @ self.P, Hc) + np.diag(rows.R)[m:]
+        else:
+            # linearised at the carried solution: its error, not the white state's 30 m, is the position's part
+            nk = self.n_kin
+            sig = 0.5 * PREDICTION_ACCEL_M_S2 * dt**2 + PREDICTION_VELOCITY_SIGMA_M_S * dt
+            S_code = (np.einsum("ij,ij->i", Hc[:, nk:] @ self.P[nk:, nk:], Hc[:, nk:]) + np.diag(rows.R)[m:]
+                      + np.sum(Hc[:, :3] ** 2, axis=1) * sig**2)
+        v_ph, v_code = rows.v[:m], rows.v[m:]
+        s_code = RANGE_FAULT_CODE_SIGMAS * np.sqrt(S_code)
+        jump = (np.abs(v_code) > s_code) & (np.abs(v_code - v_ph) <= s_code)
+        if not np.any(jump):
+            return set()
+        return {sat for sat, _ in slipped_keys(jump, dd, np.ones(m, bool), ep.sats)}
+
     def _screened_rows(self, ep: _CommonEpoch, dd: DDIndex, groups, sd: SingleDifferences, x_rov: np.ndarray,
                        var_sd: np.ndarray) -> tuple[DDIndex, Rows, np.ndarray]:
         """Prefit screening of the DD rows against the prior state: a phase row with an established
@@ -877,13 +940,21 @@ class RtkFilter:
 
     def _predicted_position(self, t: float) -> np.ndarray:
         """Where to linearise this epoch's measurement update (see `_measurement_update`)."""
+        dt = self._prediction_dt(t)
+        if dt is not None:
+            _, p0, v0 = self._last_solution
+            return p0 + v0 * dt
+        return self.x[:3].copy()
+
+    def _prediction_dt(self, t: float) -> float | None:
+        """How far [s] the last solution is carried to t to linearise at (None: linearised at the state)."""
         last = self._last_solution
         if self.opt.mode == "kinematic" and self.n_kin == 3 and last is not None:
             t0, p0, v0 = last
             dt = t - t0
             if 0.0 < dt <= MAX_LINEARISATION_PREDICTION_S and np.all(np.isfinite(p0)) and np.all(np.isfinite(v0)):
-                return p0 + v0 * dt
-        return self.x[:3].copy()
+                return dt
+        return None
 
     def _code_phase_ratio(self) -> float:
         if self.opt.code_phase_ratio is not None:

@@ -24,9 +24,10 @@ interpolated between points by arc length; without it km = km_start + arc length
 Map matching projects the antenna position onto every track segment at once (numpy over segments),
 keeps the nearest point per track, and picks the track with the smallest cross-track offset.
 Cross-track is measured in the local horizontal plane, to the left of the direction of increasing
-km.  Protection levels: PL = K sigma with sigma the filter's standard deviation projected on the
-track's tangent (along) and horizontal normal (cross), and K the two-sided Gaussian quantile for the
-allocated integrity risk.  The track is *confirmed* only when the cross-track PL is below half the
+km.  Protection levels: PL = max(K sigma, b_i + K_md,i sigma) with sigma the filter's standard deviation
+projected on the track's tangent (along) and horizontal normal (cross), K the two-sided Gaussian quantile
+for the allocated integrity risk and b_i, K_md,i the per-fault bounds of the satellite and wrong-correction
+modes (integrity_allocation.py, decisions 0250 and 0253).  The track is *confirmed* only when the cross-track PL is below half the
 distance to the nearest other candidate track (so the protection region cannot reach it) and the
 offset itself is inside the gate; otherwise the match is reported as not confirmed.
 """
@@ -43,6 +44,7 @@ import numpy as np
 
 from augnet.gnss.geometry import ecef_to_geodetic, enu_rotation, geodetic_deg_to_ecef
 from augnet.onboard.integrity_allocation import ALLOCATED_PER_DECISION_RISK, gaussian_k  # noqa: F401 (re-export)
+from augnet.onboard.integrity_allocation import DEFAULT_ALLOCATION, GNSS_FAULT_MODES, IntegrityAllocation
 from augnet.onboard.integrity_allocation import correction_sigma_on_axis
 
 FORMAT = "augnet-trackmap/1"
@@ -105,6 +107,9 @@ class MapMatch:
     # the centre's correction-error sigma carried to each axis [m] (RTCM 4001; 0: none received, inf: unbounded)
     correction_along_m: float = 0.0
     correction_cross_m: float = 0.0
+    # the 1-sigma on each axis the PLs were made from (receiver's, with the correction bound in quadrature) [m]
+    along_sigma_m: float = math.inf
+    cross_sigma_m: float = math.inf
 
 
 class TrackDatabase:
@@ -243,13 +248,16 @@ class TrackDatabase:
     # map matching
 
     def match(self, position_m, covariance_m2=None, integrity_risk: float = DEFAULT_INTEGRITY_RISK,
-              gate_m: float = DEFAULT_MATCH_GATE_M, correction_gain=None, correction_sigma_m=None) -> MapMatch:
+              gate_m: float = DEFAULT_MATCH_GATE_M, correction_gain=None, correction_sigma_m=None,
+              allocation: IntegrityAllocation | None = DEFAULT_ALLOCATION) -> MapMatch:
         """Match an ECEF antenna position (with its 3x3 ECEF covariance) to the track map.
 
         `correction_sigma_m` (S,): the centre's 4001 overbound sigmas of the satellites' correction errors,
         `correction_gain` (3, S): the position's ECEF gain on them (`correction_bound.dd_position_gain`);
         their sigma on each axis inflates that axis's in quadrature before K (decision 0280). A sigma
-        without a usable gain, or a used satellite without a sigma (NaN), makes the PLs infinite."""
+        without a usable gain, or a used satellite without a sigma (NaN), makes the PLs infinite.
+        `allocation`: each PL is at least its per-fault bounds b_i + K_md sigma for the faults a GNSS fix can
+        carry (satellite, wrong correction; decisions 0250, 0253); None: the fault-free K sigma alone."""
         p = np.asarray(position_m, dtype=float)
         if p.shape != (3,) or not np.all(np.isfinite(p)):
             return _off_map("no valid position")
@@ -307,7 +315,12 @@ class TrackDatabase:
                 corr_a = float(correction_sigma_on_axis(self._T[j] @ g, correction_sigma_m))
                 corr_c = float(correction_sigma_on_axis(self._N[j] @ g, correction_sigma_m))
         k = gaussian_k(integrity_risk)
-        apl, xpl = k * math.hypot(sig_a, corr_a), k * math.hypot(sig_c, corr_c)
+        s_a, s_c = math.hypot(sig_a, corr_a), math.hypot(sig_c, corr_c)
+        apl, xpl = k * s_a, k * s_c
+        if allocation is not None:
+            # a satellite fault or a wrong correction the checks let through biases the fix (decision 0250)
+            apl = max(apl, allocation.fault_bound(s_a, "along", GNSS_FAULT_MODES))
+            xpl = max(xpl, allocation.fault_bound(s_c, "cross", GNSS_FAULT_MODES))
         # confirmed when the protection region around the estimate stays on this track's side of the
         # midline to every other track
         confirmed = bool(math.isfinite(xpl) and (abs(c) + xpl < 0.5 * nearest_other if others else xpl < gate_m))
@@ -315,7 +328,7 @@ class TrackDatabase:
             f"track not confirmed: cross-track PL {xpl:.2f} m against {nearest_other:.2f} m to the next track")
         km = float(self._km0[j] + (self._km1[j] - self._km0[j]) * u[j] / self._len[j])
         return MapMatch(tid, tr.line, km, along, c, vertical, apl, xpl, confirmed, nearest_other, near, msg,
-                        corr_a, corr_c)
+                        corr_a, corr_c, s_a, s_c)
 
 
 def _off_map(msg: str) -> MapMatch:

@@ -217,6 +217,8 @@ class TrainLog:
     # the centre's 4001 correction-error sigma on each axis in those PLs [m] (0: none received, inf: unbounded)
     correction_along_m: list[float] = field(default_factory=list)
     correction_cross_m: list[float] = field(default_factory=list)
+    along_sigma_m: list[float] = field(default_factory=list)  # the 1-sigma each PL was made from [m]
+    cross_sigma_m: list[float] = field(default_factory=list)
     message: list[str] = field(default_factory=list)
     truth_position: list[np.ndarray] = field(default_factory=list)  # truth, ECEF
     truth_km: list[float] = field(default_factory=list)  # truth chainage of the antenna
@@ -559,6 +561,8 @@ class Chain:
         log.cross_pl_m.append(m.cross_pl_m if m is not None else math.inf)
         log.correction_along_m.append(m.correction_along_m if m is not None else 0.0)
         log.correction_cross_m.append(m.correction_cross_m if m is not None else 0.0)
+        log.along_sigma_m.append(m.along_sigma_m if m is not None else math.inf)
+        log.cross_sigma_m.append(m.cross_sigma_m if m is not None else math.inf)
         log.message.append(sol.message)
         log.truth_position.append(blk.rx_ecef[e, tr.row].copy())
         rx = self.world.receivers[tr.row]
@@ -588,8 +592,8 @@ class Chain:
         """Every method's along-track position at t from this epoch's map-matched fix and odometer reading."""
         fix = None
         if (m is not None and sol.status != Status.NONE and np.all(np.isfinite(sol.position_m))
-                and math.isfinite(m.along_pl_m) and m.along_pl_m > 0):
-            fix = AlongTrackFix(t, m.km * 1000.0, m.along_pl_m / gaussian_k(tr.unit.integrity_risk))
+                and math.isfinite(m.along_sigma_m) and m.along_sigma_m > 0):
+            fix = AlongTrackFix(t, m.km * 1000.0, m.along_sigma_m)
         odo = self.odometers.sample(tr.log.id, epoch, t)
         for method, fusion in tr.fusions.items():
             tr.log.fused[method].append(fusion.step(t, odo, fix))
@@ -611,7 +615,7 @@ class Chain:
             return
         prev = fused[-2]
         dt = now.time - prev.time
-        sigma = now.pl_m / tr.timer.k
+        sigma = now.sigma_m
         if dt <= 0 or not math.isfinite(sigma):
             return
         speed = (now.position_m - prev.position_m) / dt

@@ -218,7 +218,7 @@ class OnboardTrain:
             along = m.km * 1000.0
             prev = self._last_fix_along
             self._last_fix_along = (t, m.track, along)
-            sigma = m.along_pl_m / self.k_h
+            sigma = m.along_sigma_m  # the PL carries fault bounds: not PL / K (decision 0253)
             if prev is not None and prev[1] == m.track and 0.0 < t - prev[0] <= MAX_SPEED_BASE_S:
                 dt = t - prev[0]
                 # speed from two fixes, variance of their difference (as the scenario runner's timer)

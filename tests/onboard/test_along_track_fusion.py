@@ -135,3 +135,24 @@ def test_median_bound_holds_whatever_the_outvoted_estimates_do():
         inside = bound <= b
         x = np.where(inside, rng.uniform(-1, 1, n) * bound, rng.normal(0, 100, n))  # outside: any fault
         assert abs(x[weighted_median(x, w)]) <= b + 1e-12
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_a_fix_bias_the_checks_pass_stays_inside_the_pl(method):
+    """Decision 0253: every fix 0.4 m off (a satellite fault or a wrong correction below the checks' reach,
+    decision 0250's bias b = 0.5 m) shifts every estimate alike; the PL carries b + K_md sigma, so no
+    epoch is misleading; with the fault terms off, K sigma (0.37 m at 5 cm) is not enough."""
+    from augnet.onboard.integrity_allocation import DEFAULT_ALLOCATION
+
+    sc, t, truth_m, odo = world(120)
+    res = {}
+    for terms in (True, False):
+        f = AlongTrackFusion(method, OdometerModel(), FusionSettings(fault_terms=terms))
+        rng = np.random.default_rng(5)
+        out = [f.step(t[e], odo.sample("T1", e, t[e]), AlongTrackFix(t[e], truth_m[e] + 0.4 + rng.normal(0, 0.01), 0.05))
+               for e in range(120)]
+        res[terms] = sum(o.available and abs(o.position_m - x) > o.pl_m for x, o in zip(truth_m, out))
+        if terms:
+            assert all(o.pl_m >= DEFAULT_ALLOCATION.fault_bound(o.sigma_m, "along") - 1e-12 for o in out)
+            assert sum(o.available for o in out) >= 110
+    assert res[True] == 0 and res[False] > 0

@@ -82,12 +82,12 @@ def test_the_map_match_pl_grows_by_the_bound_and_is_infinite_for_a_used_satellit
     p = db.position_at("UP", 11.0)
     T, N, U = db.tangent_at("UP", 11.0)
     C = 0.02**2 * np.outer(T, T) + 0.01**2 * np.outer(N, N) + 0.05**2 * np.outer(U, U)
-    plain = db.match(p, C, integrity_risk=1e-9)
-    assert db.match(p, C, integrity_risk=1e-9, correction_gain=None, correction_sigma_m=None) == plain
+    plain = db.match(p, C, integrity_risk=1e-9, allocation=None)  # the fault-free term: the bound's effect on it
+    assert db.match(p, C, integrity_risk=1e-9, correction_gain=None, correction_sigma_m=None, allocation=None) == plain
     geo, _ = _geometry(np.random.default_rng(4))
     G = dd_position_gain(geo)
     sigma = np.full(8, 0.01)
-    m = db.match(p, C, integrity_risk=1e-9, correction_gain=G, correction_sigma_m=sigma)
+    m = db.match(p, C, integrity_risk=1e-9, correction_gain=G, correction_sigma_m=sigma, allocation=None)
     k = gaussian_k(1e-9)
     corr_a = float(np.sum(np.abs(T @ G) * sigma))
     assert m.correction_along_m == pytest.approx(corr_a, rel=1e-4) and corr_a > 0

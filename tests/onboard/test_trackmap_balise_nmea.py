@@ -124,12 +124,31 @@ def test_protection_levels_project_the_covariance_on_the_track(db):
     T, N, U = db.tangent_at("UP", 11.0)
     # 0.3 m sigma along the track, 0.01 m across, 0.05 m up
     C = 0.3**2 * np.outer(T, T) + 0.01**2 * np.outer(N, N) + 0.05**2 * np.outer(U, U)
-    m = db.match(db.position_at("UP", 11.0), C, integrity_risk=1e-9)
+    m = db.match(db.position_at("UP", 11.0), C, integrity_risk=1e-9, allocation=None)  # fault-free term alone
     k = gaussian_k(1e-9)
     assert k == pytest.approx(6.109, abs=0.01)  # two-sided Gaussian quantile for 1e-9
     assert m.along_pl_m == pytest.approx(k * 0.3, rel=1e-3)
     assert m.cross_pl_m == pytest.approx(k * 0.01, rel=1e-2)
+    assert (m.along_sigma_m, m.cross_sigma_m) == pytest.approx((0.3, 0.01), rel=1e-2)
     assert m.confirmed
+
+
+def test_protection_levels_bound_the_satellite_and_correction_faults(db):
+    # decision 0253: a satellite fault or a wrong correction the checks let through biases the fix by up to
+    # b_i; the PL is max(K sigma, b_i + K_md sigma) (decision 0250), so a fixed 2 cm sigma no longer gives 0.15 m
+    from augnet.onboard.integrity_allocation import DEFAULT_ALLOCATION, DEFAULT_FAULT_MODES
+
+    T, N, U = db.tangent_at("UP", 11.0)
+    C = 0.02**2 * np.outer(T, T) + 0.01**2 * np.outer(N, N) + 0.05**2 * np.outer(U, U)
+    m = db.match(db.position_at("UP", 11.0), C)
+    sat = DEFAULT_FAULT_MODES[0]
+    k_md = DEFAULT_ALLOCATION.k_missed_detection(sat)
+    assert m.along_pl_m == pytest.approx(sat.bias_along_m + k_md * 0.02, rel=1e-3)
+    assert m.cross_pl_m == pytest.approx(sat.bias_cross_m + k_md * 0.01, rel=1e-2)
+    assert m.along_pl_m > DEFAULT_ALLOCATION.k_fault_free * 0.02
+    # a wide sigma: the fault-free term dominates again
+    wide = db.match(db.position_at("UP", 11.0), C * 100.0)
+    assert wide.along_pl_m == pytest.approx(DEFAULT_ALLOCATION.k_fault_free * 0.2, rel=1e-3)
 
 
 def test_off_the_map_and_no_position(db):
@@ -165,7 +184,7 @@ def test_virtual_balises_captured_once_each_on_the_right_track_with_small_error(
     for e in sink.events:
         true_t = 1000.0 + (e.km - 10.1) * 1000.0 / speed
         assert abs(e.time - true_t) * speed < 0.5  # capture position error under 0.5 m
-        assert e.direction == 1 and e.along_pl_m < 0.2 and not e.late
+        assert e.direction == 1 and e.along_pl_m < 0.7 and not e.late  # 0.5 m satellite-fault bias + K_md sigma
     assert sink.events[0].telegram == bytes.fromhex("a1b2c3")
 
 

@@ -39,10 +39,14 @@ def runs():
     return {on: simulate(_scenario(), warm_up_s=WARM_UP_S, correction_bound=on) for on in (False, True)}
 
 
+from augnet.onboard.integrity_allocation import DEFAULT_ALLOCATION, GNSS_FAULT_MODES  # noqa: E402
+
+
 def _arrays(log):
     tl = log.trains["G101"]
     return {k: np.array(getattr(tl, k), float) for k in
-            ("status", "along_pl_m", "cross_pl_m", "correction_along_m", "correction_cross_m")}, tl
+            ("status", "along_pl_m", "cross_pl_m", "correction_along_m", "correction_cross_m", "along_sigma_m",
+             "cross_sigma_m")}, tl
 
 
 def test_with_the_bound_on_the_pls_grow_by_it_and_without_it_they_are_unchanged(runs):
@@ -57,7 +61,10 @@ def test_with_the_bound_on_the_pls_grow_by_it_and_without_it_they_are_unchanged(
     for axis in ("along", "cross"):
         corr = on[f"correction_{axis}_m"][rtk]
         assert np.all(np.isfinite(corr)) and np.all(corr > 0)  # every RTK epoch bounded, none unbounded
-        grown = k * np.hypot(off[f"{axis}_pl_m"][rtk] / k, corr)
+        # the bound inflates the receiver sigma in quadrature; the PL is then max(K sigma, fault bounds) (0253)
+        sig = np.hypot(off[f"{axis}_sigma_m"][rtk], corr)
+        assert on[f"{axis}_sigma_m"][rtk] == pytest.approx(sig, rel=1e-9)
+        grown = np.array([max(k * s, DEFAULT_ALLOCATION.fault_bound(s, axis, GNSS_FAULT_MODES)) for s in sig])
         assert on[f"{axis}_pl_m"][rtk] == pytest.approx(grown, rel=1e-9)
         assert np.all(on[f"{axis}_pl_m"][rtk] > off[f"{axis}_pl_m"][rtk])
     # outside the RTK epochs (no corrections used) nothing changes
