@@ -16,6 +16,7 @@ scenario is resolved, and the resolved scenario (`Scenario.model_dump()`) is wha
 from __future__ import annotations
 
 import datetime as _dt
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 from typing import Annotated, Literal
@@ -193,6 +194,28 @@ class Noise(_Strict):
     second_signal_code_factor: float = Field(default=1.0, ge=0.1, le=10.0)
 
 
+# A ReceiverEvents entry names receiver ids or one of these classes; a named receiver takes its entry over its class's.
+RECEIVER_CLASSES = {"stations": "station", "trains": "train"}
+RECEIVER_EVENT_FIELDS = ("cycle_slips_per_hour", "phase_resets_per_hour", "unflagged_slips_per_hour",
+                         "data_gaps_per_hour")
+
+
+class ReceiverEvents(_Strict):
+    """The tracking events of some receivers in place of `errors`' own; a rate left out keeps errors' value.
+
+    With `announced`, the receiver flags the events errors calls unflagged: its phase resets and slips carry LLI
+    (loss of lock) and restart the lock time, as a rover that reports its slips does (RINEX LLI, MSM lock time
+    DF407), so a rover engine resets the ambiguity instead of guessing; its gaps still carry the phase through.
+    """
+
+    receivers: list[str] = Field(min_length=1)  # receiver ids, or "stations" / "trains"
+    cycle_slips_per_hour: float | None = Field(default=None, ge=0.0, le=3600.0)
+    phase_resets_per_hour: float | None = Field(default=None, ge=0.0, le=3600.0)
+    unflagged_slips_per_hour: float | None = Field(default=None, ge=0.0, le=3600.0)
+    data_gaps_per_hour: float | None = Field(default=None, ge=0.0, le=3600.0)
+    announced: bool | None = None  # None keeps the class entry's (else False)
+
+
 class Errors(_Strict):
     ionosphere: Ionosphere = Ionosphere()
     troposphere: Troposphere = Troposphere()
@@ -207,6 +230,35 @@ class Errors(_Strict):
     phase_resets_per_hour: float = Field(default=0.0, ge=0.0, le=3600.0)
     unflagged_slips_per_hour: float = Field(default=0.0, ge=0.0, le=3600.0)
     data_gaps_per_hour: float = Field(default=0.0, ge=0.0, le=3600.0)
+    # Receivers whose own events differ from the above (a rover is not a reference station; decision 0273).
+    by_receiver: list[ReceiverEvents] = Field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class ResolvedEvents:
+    """One receiver's event rates [per satellite-hour] after errors.by_receiver, and whether it flags them."""
+
+    cycle_slips_per_hour: float
+    phase_resets_per_hour: float
+    unflagged_slips_per_hour: float
+    data_gaps_per_hour: float
+    announced: bool = False
+
+
+def receiver_events(errors: Errors, receivers: list[tuple[str, str]]) -> list[ResolvedEvents]:
+    """Per receiver (id, kind "station" / "train", in world order): its events, errors' own unless an entry of
+    errors.by_receiver names its class or, taking precedence, its id."""
+    out = []
+    for rid, kind in receivers:
+        entries = [e for e in errors.by_receiver if any(RECEIVER_CLASSES.get(n) == kind for n in e.receivers)]
+        entries += [e for e in errors.by_receiver if rid in e.receivers]
+        values = {f: getattr(errors, f) for f in RECEIVER_EVENT_FIELDS}
+        announced = False
+        for e in entries:
+            values.update({f: getattr(e, f) for f in RECEIVER_EVENT_FIELDS if getattr(e, f) is not None})
+            announced = e.announced if e.announced is not None else announced
+        out.append(ResolvedEvents(**values, announced=announced))
+    return out
 
 
 # Fault kinds injected on the truth side (docs/decisions/0252-fault-injection-campaign.md); units in the names.
@@ -356,6 +408,16 @@ class Scenario(_Strict):
             if f.station is not None and f.station not in station_ids:
                 raise ValueError(f"fault names station {f.station!r}; stations are {sorted(station_ids)}")
         train_ids = {t.id for t in self.trains}
+        named: list[str] = []
+        for entry in self.errors.by_receiver:
+            for n in entry.receivers:
+                if n not in receiver_ids and n not in RECEIVER_CLASSES:
+                    raise ValueError(f"errors.by_receiver names {n!r}; receivers are {sorted(receiver_ids)}, "
+                                     f"classes {sorted(RECEIVER_CLASSES)}")
+            named += entry.receivers
+        twice = sorted({n for n in named if named.count(n) > 1})
+        if twice:
+            raise ValueError(f"errors.by_receiver names {twice} in more than one entry")
         for f in self.faults:
             if f.train is not None and f.train not in train_ids:
                 raise ValueError(f"fault names train {f.train!r}; trains are {sorted(train_ids)}")

@@ -11,8 +11,10 @@ Per (receiver, satellite, signal), one epoch at a time:
     resets (the phase re-aligned to the code on every signal, as Trimble NetRS at 30 s do 2-25 times a
     day, decision 0150: every signal jumps by the same distance rounded to its cycles, so code minus phase
     jumps by metres to kilometres and the geometry-free phase by under 0.25 m), cycle slips without a flag,
-    and data gaps of a few epochs with the phase carried through; no LLI, the lock time runs on. They draw
-    from their own random stream, so a scenario without them gives the same bytes as before.
+    and data gaps of a few epochs with the phase carried through; no LLI, the lock time runs on (unless the
+    receiver announces them: then its resets and slips are flagged and restart the lock time). They draw
+    from their own random stream, so a scenario without them gives the same bytes as before; the rates may
+    differ per receiver (scenario errors.by_receiver) without moving any other receiver's draws.
 Random numbers are drawn in fixed shapes every epoch, so results do not depend on how epochs are
 grouped into blocks.
 """
@@ -49,16 +51,26 @@ class TrackingEpoch:
 
 @dataclass(frozen=True)
 class Unflagged:
-    """Rates per receiver-satellite and hour of the events a real receiver does not flag."""
+    """Rates per receiver-satellite and hour of the events a real receiver does not flag: one for every receiver,
+    or one per receiver (R,). `announced` (R,) bool: receivers that flag these resets and slips after all (LLI,
+    lock time restarted; decision 0273), drawn at the same moments as if they did not."""
 
-    phase_resets_per_hour: float = 0.0
-    slips_per_hour: float = 0.0
-    gaps_per_hour: float = 0.0
+    phase_resets_per_hour: float | np.ndarray = 0.0
+    slips_per_hour: float | np.ndarray = 0.0
+    gaps_per_hour: float | np.ndarray = 0.0
     wavelength_m: np.ndarray | None = field(default=None, compare=False)  # (N, K), for the resets
+    announced: np.ndarray | None = field(default=None, compare=False)
 
     @property
     def any(self) -> bool:
-        return self.phase_resets_per_hour > 0 or self.slips_per_hour > 0 or self.gaps_per_hour > 0
+        return bool(np.any(np.asarray(self.phase_resets_per_hour) > 0) or np.any(np.asarray(self.slips_per_hour) > 0)
+                    or np.any(np.asarray(self.gaps_per_hour) > 0))
+
+
+def _per_receiver(rate_per_hour, dt_s: float):
+    """An event probability per epoch: a scalar, or (R, 1) from per-receiver rates (broadcast over satellites)."""
+    p = np.asarray(rate_per_hour, float) / 3600.0 * dt_s
+    return p[:, None] if p.ndim == 1 else p
 
 
 class Tracking:
@@ -67,7 +79,7 @@ class Tracking:
                  rng_unflagged: np.random.Generator | None = None):
         self.shape = shape
         self.dt = dt_s
-        self.p_slip = slips_per_hour / 3600.0 * dt_s
+        self.p_slip = _per_receiver(slips_per_hour, dt_s)  # scalar or per receiver (R,)
         self.half_cycle_on = half_cycle
         self.rng = rng
         self.tracking = np.zeros(shape[:2], bool)
@@ -78,12 +90,15 @@ class Tracking:
         if self.unflagged is not None:
             u = self.unflagged
             self.rng_u = rng_unflagged
-            self.p_reset = u.phase_resets_per_hour / 3600.0 * dt_s
-            self.p_uslip = u.slips_per_hour / 3600.0 * dt_s
-            self.p_gap = u.gaps_per_hour / 3600.0 * dt_s
+            self.p_reset = _per_receiver(u.phase_resets_per_hour, dt_s)
+            self.p_uslip = _per_receiver(u.slips_per_hour, dt_s)
+            self.p_gap = _per_receiver(u.gaps_per_hour, dt_s)
+            self.announced = (np.zeros(shape[0], bool) if u.announced is None
+                              else np.asarray(u.announced, bool))[:, None, None]
             lam = u.wavelength_m if u.wavelength_m is not None else np.ones(shape[1:])
             self.lam = np.where(np.isfinite(lam), lam, np.inf)[None]  # (1, N, K)
             self.gap_left = np.zeros(shape[:2], int)
+            self.pending = np.zeros(shape, bool)  # loss-of-lock flags waiting for the end of a gap
 
     def step(self, visible: np.ndarray) -> TrackingEpoch:
         """Advance one epoch given which (receiver, satellite) pairs can be tracked now."""
@@ -104,7 +119,12 @@ class Tracking:
         self.lock_s = np.where(reset, 0.0, self.lock_s + self.dt)
         dropped = None
         if self.unflagged is not None:
-            dropped = self._unflagged(visible, new_arc, slip, draw_jump, draw_jump_on)
+            dropped, moved = self._unflagged(visible, new_arc, slip, draw_jump, draw_jump_on)
+            told = moved & self.announced  # a receiver that announces them: flagged, lock time restarted
+            self.lock_s = np.where(told, 0.0, self.lock_s)
+            reset = reset | told | self.pending
+            # a flag raised while the satellite's data are dropped (a gap) goes out with its next data
+            self.pending = reset & dropped[..., None]
         if self.half_cycle_on:
             self.half = np.where(new_arc[..., None], np.where(draw_half, 0.5, 0.0), self.half)
             self.half = np.where(self.lock_s >= HALF_CYCLE_RESOLVE_S, 0.0, self.half)
@@ -113,7 +133,8 @@ class Tracking:
         return TrackingEpoch(self.amb, self.half, self.lock_s, lli, dropped)
 
     def _unflagged(self, visible, new_arc, slip, draw_jump, draw_jump_on):
-        """Phase resets, unflagged slips and gaps on the arcs that carry on this epoch; the dropped mask."""
+        """Phase resets, unflagged slips and gaps on the arcs that carry on this epoch; the dropped mask (R, N) and
+        the signals whose phase moved (R, N, K)."""
         R, N, K = self.shape
         rng = self.rng_u
         u = rng.random((3, R, N))
@@ -130,4 +151,4 @@ class Tracking:
         self.gap_left = np.where(visible, np.maximum(self.gap_left - 1, 0), 0)
         start = going & (self.gap_left == 0) & (u[2] < self.p_gap)
         self.gap_left = np.where(start, gap_len, self.gap_left)
-        return self.gap_left > 0
+        return self.gap_left > 0, (d_reset != 0) | (jump != 0)

@@ -38,7 +38,7 @@ from stations.kinematics import GRID_M, braking_curve, drive, train_motion
 from stations.layout import Layout
 from stations.orbit_errors import OrbitClockErrors
 from stations.receiver_errors import GRADES, NoiseAndMultipath, ReceiverClocks, cnr_dbhz, elevation_scale
-from stations.scenario import Scenario, resolve_ionosphere
+from stations.scenario import RECEIVER_EVENT_FIELDS, Scenario, receiver_events, resolve_ionosphere
 from stations.track import TrackLine, check_on_line, cutting_mask_rad
 from stations.tracking import Tracking, Unflagged
 from stations.troposphere import WetResidualField, niell, zenith_delays_m
@@ -207,11 +207,14 @@ class World:
         self.noise = NoiseAndMultipath(shape, self.dt, self.sigma_code, self.sigma_phase,
                                        [GRADES[g]["mp_tau_s"] for g in grades], nz.enabled and nz.multipath,
                                        rng_noise, rng_init, code_factor)
-        unflagged = Unflagged(errs.phase_resets_per_hour, errs.unflagged_slips_per_hour, errs.data_gaps_per_hour,
-                              self.wavelength_m)
+        # each receiver's events: errors' own unless errors.by_receiver gives it (or its class) its own (0273)
+        self.receiver_events = receiver_events(errs, [(r.id, r.kind) for r in self.receivers])
+        ev = {f: np.array([getattr(x, f) for x in self.receiver_events]) for f in RECEIVER_EVENT_FIELDS}
+        unflagged = Unflagged(ev["phase_resets_per_hour"], ev["unflagged_slips_per_hour"], ev["data_gaps_per_hour"],
+                              self.wavelength_m, np.array([x.announced for x in self.receiver_events], bool))
         # their own stream: a scenario without them draws exactly what it drew before
         rng_unflagged = np.random.default_rng([sc.seed, 0x0F1A]) if unflagged.any else None
-        self.tracking = Tracking(shape, self.dt, errs.cycle_slips_per_hour, errs.half_cycle, rng_track,
+        self.tracking = Tracking(shape, self.dt, ev["cycle_slips_per_hour"], errs.half_cycle, rng_track,
                                  unflagged, rng_unflagged)
         self._next_epoch = 0
 

@@ -44,6 +44,9 @@ from the same world with its own events off. With them, RTKLIB misses some of th
 slips: CONFIG 91.6 % after its first fix, 4 wrong fixed epochs, CONFIG_VRS 92.1 %, 17 wrong, and the same on a
 VRS from event-free stations (91.6 %, 4; 94.0 %, 25): the stations' events do not reach our VRS. Without the
 rover's: CONFIG 100 % after its first fix (40 s), H95 1.6 cm, CONFIG_VRS 97.6 % (60 s), H95 1.7 cm, no wrong fix.
+Since decision 0273 the rover keeps its events but announces them (errors.by_receiver, LLI and lock time
+restarted), one recording: CONFIG 99.3 % after its first fix (40 s), H95 1.6 cm, CONFIG_VRS 97.6 % (60 s),
+H95 1.7 cm, no wrong fix.
 """
 
 from __future__ import annotations
@@ -58,7 +61,7 @@ from augnet.centre.postprocess import parse_point, run_vrs, to_obsdata
 from augnet.gnss.geometry import ecef_to_enu
 from augnet.gnss.rinex import read_obs
 from stations.record import record
-from stations.scenario import load_scenario
+from stations.scenario import load_scenario, parse_scenario
 from tests.conftest import require_tool
 from tests.rtklib_pos import read_pos
 
@@ -101,8 +104,8 @@ ant2-postype       =rinexhead
 CONFIG_VRS = (CONFIG.replace("pos2-armode        =continuous", "pos2-armode        =fix-and-hold")
               + f"pos2-arlockcnt     ={int(round(ARLOCK_S * RATE_HZ))}\n")
 CONFIGS = {"CONFIG": CONFIG, "CONFIG_VRS": CONFIG_VRS}
-# the rover receiver's unannounced events off (the reference stations keep the preset's)
-ROVER_ANNOUNCES_EVENTS = {"phase_resets_per_hour": 0.0, "unflagged_slips_per_hour": 0.0, "data_gaps_per_hour": 0.0}
+# the rover receiver announces its events (LLI, lock time restarted; decision 0273), the stations keep the preset's
+ROVER_ANNOUNCES_EVENTS = {"receivers": [ROVER], "announced": True}
 
 
 def _truth(path, rx):
@@ -155,14 +158,15 @@ def network70(tmp_path_factory):
     against VRS and every station, with both rnx2rtkp settings."""
     rnx2rtkp = require_tool("rnx2rtkp")
     d = tmp_path_factory.mktemp("network70")
-    sc = load_scenario("network-70km").model_copy(update={"duration_s": DURATION_S, "rate_hz": RATE_HZ})
+    base = load_scenario("network-70km")
+    data = base.model_dump(mode="json") | {"duration_s": DURATION_S, "rate_hz": RATE_HZ}
+    # the rover's receiver flags its resets and slips (errors.by_receiver, decision 0273): RTKLIB's detector on
+    # unflagged rover data is not what this measures; with them it misses some and fixes wrong on either VRS,
+    # ours or one from event-free stations alike (decision 0272)
+    data["errors"]["by_receiver"] = [ROVER_ANNOUNCES_EVENTS]
+    sc = parse_scenario(data)
     record(sc, d, rtcm=False)
-    # the rover's own file from a receiver that flags its slips (the same world, its unannounced events off):
-    # RTKLIB's detector on the rover's data is not what this measures; with them it misses some and fixes wrong
-    # on either VRS, ours or one from event-free stations alike (decision 0272)
-    rover_dir = d / "rover"
-    record(sc.model_copy(update={"errors": sc.errors.model_copy(update=ROVER_ANNOUNCES_EVENTS)}), rover_dir,
-           rtcm=False)
+    rover_dir = d
     vrs_path = d / "vrs.obs"
     result, summary = run_vrs(d, CHECK_POINT, vrs_path)
     truth = _truth(d / "truth.csv", ROVER)

@@ -149,19 +149,13 @@ def test_catnet_like_preset_at_least_as_harsh_as_real(real, tmp_path):
     assert len(comps) == 18
 
 
-# demo keeps its milder receiver until RTKLIB's rtkrcv riding `augnet up demo` holds its fix with catnet's events
-# (decision 0272, 2026-12-04 addendum: 131 of 156 fixed after its first fix under load, 154 of 154 without them)
-DEMO_KEPT_MILD = pytest.mark.xfail(strict=True, reason="demo keeps its mild receiver events (decision 0272 addendum)")
-
-
 @pytest.mark.slow
 @pytest.mark.shared_data
 @pytest.mark.timeout(LONG_RUN_TIMEOUT_S)
-@pytest.mark.parametrize("label", [pytest.param(r.label, marks=DEMO_KEPT_MILD) if r.scenario == "demo" else r.label
-                                   for r in cal.shipped_runs()])
+@pytest.mark.parametrize("label", [r.label for r in cal.shipped_runs()])
 def test_no_shipped_preset_milder_than_real(real, tmp_path, label):
     """Issue 14: every shipped preset, a day at 30 s, at least as harsh as catnet on all 18 statistics (decision
-    0272: their receiver events and L2 code are catnet-like's)."""
+    0272: their receiver events and L2 code are catnet-like's; demo's trains announce theirs, 0273)."""
     run = next(r for r in cal.PRESET_RUNS if r.label == label)
     folder = cal.record_run(run, cal.RATE_30S_HZ, cal.DAY_S, tmp_path / run.label.replace(" ", "-"))
     st, pr = cal.measure_recording(folder, run.stations, run.pairs)

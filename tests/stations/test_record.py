@@ -178,3 +178,43 @@ def test_msm_keeps_the_phase_through_a_phase_reset_of_kilometres():
     step = np.abs(np.diff(np.rint(off), axis=0)) > 0
     restarted = np.diff(lock, axis=0) < 0
     assert step.any() and restarted[step].all()
+
+
+@pytest.mark.rtklib
+def test_an_announced_slip_reaches_rtklib_through_the_msm_lock_time(tmp_path):
+    """A receiver that announces its slips (errors.by_receiver, decision 0273) restarts the MSM lock time (DF407)
+    at each one; RTKLIB reads a lock time that went down as loss of lock (rtcm3.c lossoflock), so convbin's RINEX
+    carries the LLI of every slip and reset our RINEX carries, and none where the same receiver keeps them quiet."""
+    convbin = require_tool("convbin")
+    base = load_scenario("baseline-10km")
+    errors = base.errors.model_copy(update=dict(phase_resets_per_hour=30.0, unflagged_slips_per_hour=60.0,
+                                                data_gaps_per_hour=0.0))
+    sc = base.model_copy(update=dict(duration_s=120.0, errors=errors))
+    data = sc.model_dump(mode="json")
+    data["errors"]["by_receiver"] = [{"receivers": ["B"], "announced": True}]
+    from stations.scenario import parse_scenario
+
+    flagged = {}
+    for label, scen in (("quiet", sc), ("announced", parse_scenario(data))):
+        out = tmp_path / label
+        record(scen, out)
+        subprocess.run([convbin, "-r", "rtcm3", "-tr", "2026/03/10 02:00:00", "-v", "3.04", "-od", "-os",
+                        "-o", str(out / "conv.obs"), str(out / "B.rtcm3")], check=True, capture_output=True, timeout=60)
+        ours, conv = read_obs(out / "B.obs"), read_obs(out / "conv.obs")
+        assert np.array_equal(ours.times, conv.times)
+        ours_set, conv_set = set(), set()
+        for typ in ("L1C", "L2W", "L5Q", "L2I", "L6I"):
+            for j, sat in enumerate(ours.sats):
+                if sat not in conv.sats:
+                    continue
+                a, b = ours.lli[typ][:, j], conv.lli[typ][:, conv.sat_index(sat)]
+                seen = ~np.isnan(ours.obs[typ][:, j])
+                inside = seen & np.r_[False, seen[:-1]]  # not an arc's first epoch
+                ours_set |= {(e, sat, typ) for e in np.flatnonzero(inside & ((a & 1) != 0))}
+                conv_set |= {(e, sat, typ) for e in np.flatnonzero(inside & ((b & 1) != 0))}
+        flagged[label] = (ours_set, conv_set)
+    ours_a, conv_a = flagged["announced"]
+    print({k: (len(a), len(b)) for k, (a, b) in flagged.items()})
+    assert len(ours_a) > 20 and ours_a <= conv_a
+    ours_q, conv_q = flagged["quiet"]
+    assert not ours_q and len(conv_q) < len(ours_a) / 2  # quiet: only the MSM re-alignments of long resets

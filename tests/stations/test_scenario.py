@@ -82,6 +82,33 @@ def test_inconsistent_references_are_refused():
         parse_scenario(d)
 
 
+def test_receiver_events_by_receiver():
+    """errors.by_receiver (decision 0273): a class entry, then a named receiver's entry over it; a rate left out
+    keeps errors' own; an unknown receiver or one named twice is refused."""
+    from stations.scenario import receiver_events
+
+    d = _demo_dict()
+    d["errors"].update(phase_resets_per_hour=0.3, unflagged_slips_per_hour=0.2, data_gaps_per_hour=0.3)
+    d["errors"]["by_receiver"] = [{"receivers": ["trains"], "announced": True, "data_gaps_per_hour": 1.0},
+                                  {"receivers": ["G303"], "unflagged_slips_per_hour": 0.0}]
+    sc = parse_scenario(d)
+    ev = dict(zip(["STA1", "G101", "G303"], receiver_events(sc.errors, [("STA1", "station"), ("G101", "train"),
+                                                                         ("G303", "train")])))
+    assert (ev["STA1"].announced, ev["STA1"].data_gaps_per_hour, ev["STA1"].unflagged_slips_per_hour) == (False, 0.3, 0.2)
+    assert (ev["G101"].announced, ev["G101"].data_gaps_per_hour, ev["G101"].phase_resets_per_hour) == (True, 1.0, 0.3)
+    assert (ev["G303"].announced, ev["G303"].unflagged_slips_per_hour, ev["G303"].data_gaps_per_hour) == (True, 0.0, 1.0)
+    assert resolved_dict(sc)["errors"]["by_receiver"][0]["receivers"] == ["trains"]
+    d["errors"]["by_receiver"] = [{"receivers": ["G999"], "announced": True}]
+    with pytest.raises(ScenarioError, match="G999"):
+        parse_scenario(d)
+    d["errors"]["by_receiver"] = [{"receivers": ["G101"]}, {"receivers": ["G101", "STA1"]}]
+    with pytest.raises(ScenarioError, match="more than one entry"):
+        parse_scenario(d)
+    d["errors"]["by_receiver"] = [{"receivers": ["trains"], "announced": "sometimes"}]
+    with pytest.raises(ScenarioError, match=r"errors.by_receiver.0.announced"):
+        parse_scenario(d)
+
+
 def test_missing_file_and_bad_yaml(tmp_path):
     with pytest.raises(ScenarioError, match="no such file"):
         load_scenario(tmp_path / "none.yaml")

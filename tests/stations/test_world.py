@@ -367,3 +367,65 @@ def test_unflagged_events_draw_apart_from_everything_else():
     resets = _run(_scenario(duration=60, phase_resets_per_hour=120.0))[1]
     assert np.array_equal(_cat(plain, "pseudorange_m"), _cat(resets, "pseudorange_m"), equal_nan=True)
     assert not np.array_equal(_cat(plain, "phase_cyc"), _cat(resets, "phase_cyc"), equal_nan=True)
+
+
+def _by_receiver(sc, *entries):
+    """The scenario with errors.by_receiver entries (validated as a scenario file would be)."""
+    from stations.scenario import parse_scenario
+
+    data = sc.model_dump(mode="json")
+    data["errors"]["by_receiver"] = list(entries)
+    return parse_scenario(data)
+
+
+def _last_seen_changes(amb, obs):
+    """(E, R, N, K) bool: the ambiguity differs from the one of the signal's previous observed epoch, same arc or
+    not (a gap in between included)."""
+    last = np.full(amb.shape[1:], np.nan)
+    out = np.zeros(amb.shape, bool)
+    for e in range(len(amb)):
+        out[e] = obs[e] & ~np.isnan(last) & (amb[e] != last)
+        last = np.where(obs[e], amb[e], last)
+    return out
+
+
+EVENTS = dict(duration=240, phase_resets_per_hour=60.0, unflagged_slips_per_hour=30.0, data_gaps_per_hour=120.0)
+
+
+def test_a_receiver_that_announces_its_events():
+    """errors.by_receiver (decision 0273): B announces its resets and slips (LLI, lock time restarted), drawn at the
+    moments they came unannounced; A, keeping errors' events, is byte for byte what it was."""
+    plain = _scenario(**EVENTS)
+    w0, b0 = _run(plain)
+    w1, b1 = _run(_by_receiver(plain, {"receivers": ["B"], "announced": True}))
+    a, b = w0.receiver_ids.index("A"), w0.receiver_ids.index("B")
+    for name in ("pseudorange_m", "phase_cyc", "lli", "lock_time_s", "ambiguity_cyc"):
+        assert np.array_equal(_cat(b0, name)[:, a], _cat(b1, name)[:, a], equal_nan=True), name
+    assert np.array_equal(_cat(b0, "ambiguity_cyc"), _cat(b1, "ambiguity_cyc"), equal_nan=True)  # same moments
+    obs = _cat(b1, "observed")
+    moved = _last_seen_changes(_cat(b1, "ambiguity_cyc"), obs)
+    lli0, lli1, lock1 = _cat(b0, "lli"), _cat(b1, "lli"), _cat(b1, "lock_time_s")
+    assert moved[:, b].sum() > 20 and moved[:, a].sum() > 20
+    assert np.all(lli1[:, b][moved[:, b]] & 1)  # every event B's data show is flagged, after a gap too
+    assert not np.any(lli0[:, b][moved[:, b]] & 1)  # the same events unannounced
+    assert not np.any(lli1[:, a][moved[:, a]] & 1)
+    back = moved[:, b] & ~np.roll(obs[:, b], 1, axis=0)  # an event inside a gap: flagged when the data return
+    assert back.any()
+    within = moved[:, b] & ~back
+    assert np.all(lock1[:, b][within] == 0.0)  # seen at once: its lock time restarts at the event
+
+
+def test_a_receiver_with_its_own_rates():
+    """A class entry gives the stations no events, a named entry (taking precedence) gives B flagged slips."""
+    plain = _scenario(**EVENTS)
+    sc = _by_receiver(plain, {"receivers": ["stations"], "phase_resets_per_hour": 0, "unflagged_slips_per_hour": 0,
+                              "data_gaps_per_hour": 0},
+                      {"receivers": ["B"], "cycle_slips_per_hour": 60.0})
+    w, bl = _run(sc)
+    a, b = w.receiver_ids.index("A"), w.receiver_ids.index("B")
+    obs, lli = _cat(bl, "observed"), _cat(bl, "lli")
+    moved = _last_seen_changes(_cat(bl, "ambiguity_cyc"), obs)
+    assert not moved[:, a].any()  # no events at all
+    assert moved[:, b].sum() > 10 and np.all(lli[:, b][moved[:, b]] & 1)  # only flagged slips
+    seen = obs[..., 0]
+    assert not (seen[2:] & ~seen[1:-1] & seen[:-2])[:, b].any()  # its gaps are the class's: none
