@@ -38,7 +38,7 @@ from stations.kinematics import GRID_M, braking_curve, drive, train_motion
 from stations.layout import Layout
 from stations.orbit_errors import OrbitClockErrors
 from stations.receiver_errors import GRADES, NoiseAndMultipath, ReceiverClocks, cnr_dbhz, elevation_scale
-from stations.scenario import Scenario, resolve_ionosphere
+from stations.scenario import Scenario, ScenarioError, resolve_ionosphere
 from stations.track import TrackLine, check_on_line, cutting_mask_rad
 from stations.tracking import Tracking, Unflagged
 from stations.troposphere import WetResidualField, niell, zenith_delays_m
@@ -48,6 +48,12 @@ NOMINAL_TRANSIT_S = 0.075
 BLOCK_EPOCHS = 60  # epochs computed together (vectorised); results do not depend on it
 DOPPLER_NOISE_HZ = 0.02
 ATMO_RATE_STEP_S = 0.5  # half-step of the central difference giving the atmosphere's rate
+# A train's rear antenna (Train.rear_antenna): its receiver's kind and the suffix of its id ("R1.rear"; train
+# ids have no ".", so it cannot clash).
+REAR_KIND = "rear"
+REAR_SUFFIX = ".rear"
+# The train length when the scenario gives none [m]: a CR400AF 8-car set (as augnet.onboard.position_report).
+DEFAULT_TRAIN_LENGTH_M = 209.0
 BURST_SEED_TAG = 0xB0257  # multipath bursts' per-satellite signs: their own stream, no other draw moves
 
 
@@ -239,7 +245,7 @@ class World:
                                 np.zeros((self.n_epochs, 3)), outage=out_mask))
         for j, tr in enumerate(sc.trains):
             if tr.route:
-                out.append(self._route_receiver(tr, j, t_rel))
+                out.extend(self._route_receivers(tr, j, t_rel))
                 continue
             m = train_motion(tr, self.track.length_m, t_rel)
             off = self.track.track_offset_m(tr.track)
@@ -263,11 +269,17 @@ class World:
                                 outage=np.zeros(self.n_epochs, bool)))
         return out
 
-    def _route_receiver(self, tr, j: int, t_rel: np.ndarray) -> Receiver:
+    def _route_receivers(self, tr, j: int, t_rel: np.ndarray) -> list[Receiver]:
         """A train running its route over the layout: speed limited by the line speed, the scenario's
-        restrictions (by km) and the curves (stations.layout.LATERAL_ACCEL_M_S2); it stops at the route's end."""
+        restrictions (by km) and the curves (stations.layout.LATERAL_ACCEL_M_S2); it stops at the route's end.
+        With a rear antenna the train stands with its rear at start_km (the head `length_m` ahead) and a second
+        receiver `<id>.rear` (kind REAR_KIND) runs `length_m` behind the head, or, after a `train_split`, slows
+        at the fault's deceleration to a stand."""
         route = self.layout.route(tr.route, tr.direction, tr.start_km)
         self.routes[tr.id] = route
+        spacing = float(tr.length_m or DEFAULT_TRAIN_LENGTH_M) if tr.rear_antenna else 0.0
+        if spacing >= route.length_m:
+            raise ScenarioError(f"train {tr.id}: route {route.length_m:.0f} m, not longer than the train")
         u = np.arange(0.0, route.length_m + GRID_M, GRID_M)
         limit = route.speed_limit_m_s(u, tr.speed_kmh / 3.6)
         km_grid = np.interp(u, route.u_m, route.km)
@@ -278,8 +290,29 @@ class World:
             limit[inside] = np.minimum(limit[inside], p.speed_kmh / 3.6)
         limit[-1] = 0.0  # stop at the end of the route
         allowed = braking_curve(u, limit, tr.decel_m_s2)
-        um, v, _ = drive(u, allowed, route.length_m, min(tr.start_speed_kmh / 3.6, allowed[0]), tr.accel_m_s2,
-                         tr.decel_m_s2, t_rel)
+        a0 = float(np.interp(spacing, u, allowed))
+        um, v, _ = drive(u - spacing, allowed, route.length_m - spacing, min(tr.start_speed_kmh / 3.6, a0),
+                         tr.accel_m_s2, tr.decel_m_s2, t_rel)
+        um = um + spacing
+        out = [self._on_route(tr, tr.id, "train", 3000 + j, route, um, v)]
+        if tr.rear_antenna:
+            ur, vr = um - spacing, v.copy()
+            split = next((f for f in self.scenario.faults if f.kind == "train_split" and f.train == tr.id), None)
+            if split is not None:
+                # the motion is on the scenario's clock (WarmUpWorld delays it), the faults on the world's
+                t0 = float(split.at_s) - getattr(self, "warm_up_s", 0.0)
+                at = t_rel >= t0
+                if np.any(at):
+                    k0 = int(np.argmax(at))
+                    u0 = float(np.interp(t0, t_rel, ur))
+                    v0 = float(np.interp(t0, t_rel, vr))
+                    dt = np.minimum(t_rel[at] - t0, v0 / split.rear_decel_m_s2)  # to a stand
+                    ur[k0:] = u0 + v0 * dt - 0.5 * split.rear_decel_m_s2 * dt ** 2
+                    vr[k0:] = v0 - split.rear_decel_m_s2 * dt
+            out.append(self._on_route(tr, f"{tr.id}{REAR_SUFFIX}", REAR_KIND, 4000 + j, route, ur, vr))
+        return out
+
+    def _on_route(self, tr, rid: str, kind: str, rtcm_id: int, route, um: np.ndarray, v: np.ndarray) -> Receiver:
         xy, z, km, ei, _ = route.at(um)
         ecef = self.layout.plane_to_ecef(xy, z + tr.antenna_height_m)
         xy2, z2, *_ = route.at(um + 0.5)  # 0.5 m ahead: the direction of motion
@@ -290,7 +323,7 @@ class World:
         v_enu = np.einsum("eij,ej->ei", enu_rotation(llh0[:, 0], llh0[:, 1]), unit)
         zeros = np.zeros(self.n_epochs)
         edges = np.array(route.edges, dtype=object)[ei]
-        return Receiver(tr.id, "train", 3000 + j, tr.grade, ecef, unit * v[:, None],
+        return Receiver(rid, kind, rtcm_id, tr.grade, ecef, unit * v[:, None],
                         track_id=self.layout.edges[route.edges[0]].track, km=km, speed_m_s=v,
                         swept_mask_deg=zeros.copy(), cutting_deg=zeros.copy(),
                         heading_rad=np.arctan2(v_enu[:, 0], v_enu[:, 1]), outage=np.zeros(self.n_epochs, bool),
