@@ -131,6 +131,13 @@ class SpeedChange(_Strict):
     speed_kmh: float = Field(ge=0.0, le=400.0)
 
 
+class Stop(_Strict):
+    """A stop on a layout route: the train's head halts at `km` (its first pass there) and stands `dwell_s`."""
+
+    km: float = Field(ge=0.0)
+    dwell_s: float = Field(gt=0.0, le=86400.0)
+
+
 class Train(_Strict):
     id: str = Field(pattern=r"^[A-Za-z0-9_\-]{1,20}$")
     track: int = Field(default=1, ge=1)  # main-line track number (1 = left, as seen in +km)
@@ -155,6 +162,7 @@ class Train(_Strict):
     # two antennas at the two ends, their lever arms to the couplers neglected (train integrity, issue 16).
     length_m: float | None = Field(default=None, gt=0.0, le=1000.0)
     rear_antenna: bool = False
+    stops: list[Stop] = Field(default_factory=list)  # route trains only: halts in travel order (a platform stop)
 
 
 class Ionosphere(_Strict):
@@ -376,6 +384,8 @@ class Scenario(_Strict):
         for t in self.trains:
             if t.rear_antenna and not t.route:
                 raise ValueError(f"train {t.id}: a rear antenna needs a route on a layout")
+            if t.stops and not t.route:
+                raise ValueError(f"train {t.id}: stops need a route on a layout")
         rear = {t.id for t in self.trains if t.rear_antenna}
         for f in self.faults:
             if f.kind == "train_split" and f.train not in rear:

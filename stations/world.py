@@ -22,6 +22,7 @@ observables and never mixed into them.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,7 +35,7 @@ from augnet.gnss.geometry import ecef_to_geodetic, enu_rotation, geodetic_deg_to
 from augnet.gnss.signals import by_rinex
 from stations import constellation as const
 from stations.ionosphere import IonosphereField, delay_m
-from stations.kinematics import GRID_M, braking_curve, drive, train_motion
+from stations.kinematics import GRID_M, STEP_S, braking_curve, drive, train_motion
 from stations.layout import Layout
 from stations.orbit_errors import OrbitClockErrors
 from stations.receiver_errors import GRADES, NoiseAndMultipath, ReceiverClocks, cnr_dbhz, elevation_scale
@@ -110,6 +111,54 @@ class EpochBlock:
 def _system_gm_omge(system: str):
     return {"G": (GM_GPS_M3_S2, OMEGA_E_GPS_RAD_S), "E": (GM_GAL_M3_S2, OMEGA_E_GAL_RAD_S),
             "C": (GM_BDS_M3_S2, OMEGA_E_BDS_RAD_S)}[system]
+
+
+def route_motion(layout: Layout, tr, t_rel: np.ndarray, spacing_m: float = 0.0):
+    """(route, route distance [m], speed [m/s]) of a train's head at times `t_rel` on its layout route: speed
+    limited by the line speed, the scenario's restrictions (by km) and the curves (LATERAL_ACCEL_M_S2); it halts
+    at each of its `stops` for the dwell and at the route's end. The head starts `spacing_m` along the route (a
+    train with a rear antenna stands with its rear at start_km)."""
+    route = layout.route(tr.route, tr.direction, tr.start_km)
+    if spacing_m >= route.length_m:
+        raise ScenarioError(f"train {tr.id}: route {route.length_m:.0f} m, not longer than the train")
+    u = np.arange(0.0, route.length_m + GRID_M, GRID_M)
+    limit = route.speed_limit_m_s(u, tr.speed_kmh / 3.6)
+    km_grid = np.interp(u, route.u_m, route.km)
+    prof = sorted(tr.speed_profile, key=lambda p: p.from_km)
+    for k, p in enumerate(prof):
+        lo, hi = p.from_km, prof[k + 1].from_km if k + 1 < len(prof) else np.inf
+        inside = (km_grid >= lo) & (km_grid < hi)  # as train_motion: from its km to the next entry's
+        limit[inside] = np.minimum(limit[inside], p.speed_kmh / 3.6)
+    limit[-1] = 0.0  # stop at the end of the route
+    sign = 1.0 if tr.direction > 0 else -1.0
+    halts = []
+    for st in tr.stops:
+        if not min(route.km) <= st.km <= max(route.km):
+            raise ScenarioError(f"train {tr.id}: stop at km {st.km} is not on its route")
+        halts.append((float(np.interp(sign * st.km, sign * route.km, route.u_m)), st.dwell_s))
+    halts.append((route.length_m, math.inf))
+    um = np.full(len(t_rel), spacing_m)
+    v = np.zeros(len(t_rel))
+    u0, t0, v0 = spacing_m, 0.0, tr.start_speed_kmh / 3.6
+    t_end = float(np.max(t_rel)) if len(t_rel) else 0.0
+    for u_halt, dwell in sorted(halts):
+        if u_halt <= u0 or t0 > t_end:
+            continue
+        lim = limit.copy()
+        lim[u >= u_halt] = 0.0
+        allowed = braking_curve(u, lim, tr.decel_m_s2)
+        v0 = min(v0, float(np.interp(u0, u, allowed)))
+        tt = np.arange(0.0, t_end - t0 + 2 * STEP_S, STEP_S)
+        uu, vv, _ = drive(u - u0, allowed, u_halt - u0, v0, tr.accel_m_s2, tr.decel_m_s2, tt)
+        arrived = np.flatnonzero(uu >= u_halt - u0 - 1e-6)
+        t_arr = t0 + (float(tt[arrived[0]]) if len(arrived) else math.inf)
+        seg = (t_rel >= t0) & (t_rel < t_arr)
+        um[seg] = u0 + np.interp(t_rel[seg] - t0, tt, uu)
+        v[seg] = np.interp(t_rel[seg] - t0, tt, vv)
+        um[t_rel >= t_arr] = u_halt  # standing until the next leg starts (overwritten by it)
+        v[t_rel >= t_arr] = 0.0
+        u0, t0, v0 = u_halt, t_arr + dwell, 0.0
+    return route, um, v
 
 
 class World:
@@ -275,25 +324,9 @@ class World:
         With a rear antenna the train stands with its rear at start_km (the head `length_m` ahead) and a second
         receiver `<id>.rear` (kind REAR_KIND) runs `length_m` behind the head, or, after a `train_split`, slows
         at the fault's deceleration to a stand."""
-        route = self.layout.route(tr.route, tr.direction, tr.start_km)
-        self.routes[tr.id] = route
         spacing = float(tr.length_m or DEFAULT_TRAIN_LENGTH_M) if tr.rear_antenna else 0.0
-        if spacing >= route.length_m:
-            raise ScenarioError(f"train {tr.id}: route {route.length_m:.0f} m, not longer than the train")
-        u = np.arange(0.0, route.length_m + GRID_M, GRID_M)
-        limit = route.speed_limit_m_s(u, tr.speed_kmh / 3.6)
-        km_grid = np.interp(u, route.u_m, route.km)
-        prof = sorted(tr.speed_profile, key=lambda p: p.from_km)
-        for k, p in enumerate(prof):
-            lo, hi = p.from_km, prof[k + 1].from_km if k + 1 < len(prof) else np.inf
-            inside = (km_grid >= lo) & (km_grid < hi)  # as train_motion: from its km to the next entry's
-            limit[inside] = np.minimum(limit[inside], p.speed_kmh / 3.6)
-        limit[-1] = 0.0  # stop at the end of the route
-        allowed = braking_curve(u, limit, tr.decel_m_s2)
-        a0 = float(np.interp(spacing, u, allowed))
-        um, v, _ = drive(u - spacing, allowed, route.length_m - spacing, min(tr.start_speed_kmh / 3.6, a0),
-                         tr.accel_m_s2, tr.decel_m_s2, t_rel)
-        um = um + spacing
+        route, um, v = route_motion(self.layout, tr, t_rel, spacing)
+        self.routes[tr.id] = route
         out = [self._on_route(tr, tr.id, "train", 3000 + j, route, um, v)]
         if tr.rear_antenna:
             ur, vr = um - spacing, v.copy()

@@ -19,7 +19,7 @@ from stations.scenario import Fault
 
 # Split campaign: each train's rear separates at a time and decelerates at a rate drawn per seed from these
 # (seeded): from coasting on a level line (~0.05 m/s^2, running resistance) to an emergency brake (1 m/s^2).
-SPLIT_AT_S = (40.0, 70.0)  # after the first fixes (~12 s) and the facing switches' decisions
+SPLIT_AT_S = (20.0, 30.0)  # after the first fixes (~12 s), before R3 brakes to its route end (~41 s)
 SPLIT_DECEL_M_S2 = (0.05, 0.2, 1.0)
 TIME_TO_ALARM_S = 10.0  # the lower (strict) end of the requirement's 10-30 s (railway.md, train integrity)
 
