@@ -50,11 +50,18 @@ class TrainIntegrityRun:
         return self.lost_at_s - self.split_at_s if math.isfinite(self.split_at_s) else math.nan
 
 
-def split_faults(sc, seed: int) -> list[Fault]:
+def split_faults(sc, seed: int, window_s: tuple[float, float] = SPLIT_AT_S,
+                 decels_m_s2: tuple[float, ...] = SPLIT_DECEL_M_S2, trains: list[str] | None = None) -> list[Fault]:
+    """One split per train with a rear antenna (or per train of `trains`): its time drawn in `window_s`
+    (seeded by `seed`), its rear's deceleration taken in turn from `decels_m_s2`."""
     rng = np.random.default_rng([seed, 293])
-    return [Fault(kind="train_split", train=t.id, at_s=round(float(rng.uniform(*SPLIT_AT_S)), 1),
-                  rear_decel_m_s2=float(SPLIT_DECEL_M_S2[(seed + i) % len(SPLIT_DECEL_M_S2)]))
-            for i, t in enumerate(sc.trains) if t.rear_antenna]
+    out = []
+    for i, t in enumerate(sc.trains):
+        at = round(float(rng.uniform(*window_s)), 1)  # drawn for every train: the others keep their times
+        if t.rear_antenna and (trains is None or t.id in trains):
+            out.append(Fault(kind="train_split", train=t.id, at_s=at,
+                             rear_decel_m_s2=float(decels_m_s2[(seed + i) % len(decels_m_s2)])))
+    return out
 
 
 def judge(log, seed: int) -> list[TrainIntegrityRun]:
@@ -82,12 +89,14 @@ def judge(log, seed: int) -> list[TrainIntegrityRun]:
     return out
 
 
-def run(sc, seeds, *, split: bool, warm_up_s: float = 60.0, progress=None) -> list[TrainIntegrityRun]:
+def run(sc, seeds, *, split: bool, warm_up_s: float = 60.0, progress=None, **split_args) -> list[TrainIntegrityRun]:
+    """Each seed's full chain once: fault-free (`split` False) or with `split_faults(sc, seed, **split_args)`."""
     from augnet.scenario.runner import simulate
 
     out: list[TrainIntegrityRun] = []
     for seed in seeds:
-        run_sc = sc.model_copy(update={"seed": int(seed), "faults": split_faults(sc, seed) if split else []})
+        run_sc = sc.model_copy(update={"seed": int(seed),
+                                       "faults": split_faults(sc, seed, **split_args) if split else []})
         res = judge(simulate(run_sc, warm_up_s=warm_up_s), seed)
         out.extend(res)
         if progress is not None:
