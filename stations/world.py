@@ -161,6 +161,25 @@ def route_motion(layout: Layout, tr, t_rel: np.ndarray, spacing_m: float = 0.0):
     return route, um, v
 
 
+def rear_motion(t_rel: np.ndarray, um: np.ndarray, v: np.ndarray, spacing_m: float, split=None,
+                fault_clock_offset_s: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """The rear antenna's route distance and speed: `spacing_m` behind the head (`um`, `v`), or from a
+    `train_split` fault's time on (its at_s less `fault_clock_offset_s`) slowing at its deceleration to a stand."""
+    ur, vr = um - spacing_m, v.copy()
+    if split is None:
+        return ur, vr
+    t0 = float(split.at_s) - fault_clock_offset_s
+    at = t_rel >= t0
+    if np.any(at):
+        k0 = int(np.argmax(at))
+        u0 = float(np.interp(t0, t_rel, ur))
+        v0 = float(np.interp(t0, t_rel, vr))
+        dt = np.minimum(t_rel[at] - t0, v0 / split.rear_decel_m_s2)  # to a stand
+        ur[k0:] = u0 + v0 * dt - 0.5 * split.rear_decel_m_s2 * dt ** 2
+        vr[k0:] = v0 - split.rear_decel_m_s2 * dt
+    return ur, vr
+
+
 class World:
     def __init__(self, scenario: Scenario, nav_ephemerides: list[Ephemeris] | None = None):
         sc = scenario
@@ -329,19 +348,9 @@ class World:
         self.routes[tr.id] = route
         out = [self._on_route(tr, tr.id, "train", 3000 + j, route, um, v)]
         if tr.rear_antenna:
-            ur, vr = um - spacing, v.copy()
             split = next((f for f in self.scenario.faults if f.kind == "train_split" and f.train == tr.id), None)
-            if split is not None:
-                # the motion is on the scenario's clock (WarmUpWorld delays it), the faults on the world's
-                t0 = float(split.at_s) - getattr(self, "warm_up_s", 0.0)
-                at = t_rel >= t0
-                if np.any(at):
-                    k0 = int(np.argmax(at))
-                    u0 = float(np.interp(t0, t_rel, ur))
-                    v0 = float(np.interp(t0, t_rel, vr))
-                    dt = np.minimum(t_rel[at] - t0, v0 / split.rear_decel_m_s2)  # to a stand
-                    ur[k0:] = u0 + v0 * dt - 0.5 * split.rear_decel_m_s2 * dt ** 2
-                    vr[k0:] = v0 - split.rear_decel_m_s2 * dt
+            # the motion is on the scenario's clock (WarmUpWorld delays it), the faults on the world's
+            ur, vr = rear_motion(t_rel, um, v, spacing, split, getattr(self, "warm_up_s", 0.0))
             out.append(self._on_route(tr, f"{tr.id}{REAR_SUFFIX}", REAR_KIND, 4000 + j, route, ur, vr))
         return out
 
