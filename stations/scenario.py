@@ -26,7 +26,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from augnet.gnss.signals import DEFAULT_SIGNALS, SYSTEMS, UnknownSignal, by_rinex
 
-BUILTIN_SCENARIOS = ("demo", "baseline-10km", "network-70km", "iono-storm", "catnet-like", "alpha-beta")
+BUILTIN_SCENARIOS = ("demo", "baseline-10km", "network-70km", "iono-storm", "catnet-like", "alpha-beta",
+                     "alpha-beta-integrity")
 DEFAULT_SCENARIO = "demo"
 
 
@@ -131,6 +132,13 @@ class SpeedChange(_Strict):
     speed_kmh: float = Field(ge=0.0, le=400.0)
 
 
+class Stop(_Strict):
+    """A stop on a layout route: the train's head halts at `km` (its first pass there) and stands `dwell_s`."""
+
+    km: float = Field(ge=0.0)
+    dwell_s: float = Field(gt=0.0, le=86400.0)
+
+
 class Train(_Strict):
     id: str = Field(pattern=r"^[A-Za-z0-9_\-]{1,20}$")
     track: int = Field(default=1, ge=1)  # main-line track number (1 = left, as seen in +km)
@@ -150,6 +158,12 @@ class Train(_Strict):
     # On a track layout (Scenario.layout): the edges the train runs over, in travel order, the first one
     # from start_km in `direction` (stations/layout.py checks it against the layout's switches).
     route: list[str] = Field(default_factory=list)
+    # Train data: the train's length [m] (None: augnet.onboard.position_report.DEFAULT_TRAIN_LENGTH_M), and a
+    # second antenna at the rear (route trains only), `length_m` behind the head antenna along the track: the
+    # two antennas at the two ends, their lever arms to the couplers neglected (train integrity, issue 16).
+    length_m: float | None = Field(default=None, gt=0.0, le=1000.0)
+    rear_antenna: bool = False
+    stops: list[Stop] = Field(default_factory=list)  # route trains only: halts in travel order (a platform stop)
 
 
 class Ionosphere(_Strict):
@@ -264,6 +278,9 @@ def receiver_events(errors: Errors, receivers: list[tuple[str, str]]) -> list[Re
 # Fault kinds injected on the truth side (docs/decisions/0252-fault-injection-campaign.md); units in the names.
 FAULT_KINDS = ("satellite_clock_step", "satellite_clock_ramp", "multipath_burst", "station_outage",
                "station_coordinates", "odometer_slide", "odometer_slip")
+# Faults of the train itself, judged by the train-integrity monitor (augnet.track.train_integrity), not by the
+# positioning campaign of FAULT_KINDS (decision 0293).
+TRAIN_FAULT_KINDS = ("train_split",)
 
 
 class TrackLayout(_Strict):
@@ -285,10 +302,12 @@ class Fault(_Strict):
     - station_coordinates: `station`'s published coordinates (RTCM 1005 and the centre's list) are off its true
       antenna position by `offset_enu_m` (east, north, up) for the whole run (at_s must be 0);
     - odometer_slide: `train`'s wheel turns `slide_fraction` slower than the train moves (braking on wet rail);
-    - odometer_slip: `train`'s wheel turns `slip_fraction` faster than the train moves (spinning under traction).
+    - odometer_slip: `train`'s wheel turns `slip_fraction` faster than the train moves (spinning under traction);
+    - train_split: `train`'s rear part (with the rear antenna) separates at at_s and slows at `rear_decel_m_s2`
+      to a stand while the front part runs on (the train needs `rear_antenna`).
     """
 
-    kind: Literal[FAULT_KINDS]
+    kind: Literal[FAULT_KINDS + TRAIN_FAULT_KINDS]
     at_s: float = Field(ge=0.0)  # since start
     until_s: float | None = Field(default=None, ge=0.0)
     satellite: str | None = Field(default=None, pattern=r"^[GEC][0-9]{2}$")
@@ -302,6 +321,7 @@ class Fault(_Strict):
     train: str | None = None  # odometer_slide / odometer_slip: the train whose wheels slide or slip
     slide_fraction: float = Field(default=0.0, ge=0.0, le=1.0)  # wheel speed lost to the slide (1: locked)
     slip_fraction: float = Field(default=0.0, ge=0.0, le=2.0)  # wheel speed gained by the slip (1: twice)
+    rear_decel_m_s2: float = Field(default=0.0, ge=0.0, le=2.0)  # train_split: the separated rear's deceleration
 
     @model_validator(mode="after")
     def _complete(self):
@@ -321,6 +341,8 @@ class Fault(_Strict):
             name = "slide_fraction" if self.kind == "odometer_slide" else "slip_fraction"
             if self.train is None or self.until_s is None or not amount > 0.0:
                 raise ValueError(f"{self.kind} needs train, until_s and {name} > 0")
+        if self.kind == "train_split" and (self.train is None or not self.rear_decel_m_s2 > 0.0):
+            raise ValueError("train_split needs train and rear_decel_m_s2 > 0")
         if self.until_s is not None and self.until_s <= self.at_s and self.kind != "satellite_clock_step":
             raise ValueError(f"{self.kind}: until_s ({self.until_s}) must be after at_s ({self.at_s})")
         return self
@@ -421,6 +443,15 @@ class Scenario(_Strict):
         for f in self.faults:
             if f.train is not None and f.train not in train_ids:
                 raise ValueError(f"fault names train {f.train!r}; trains are {sorted(train_ids)}")
+        for t in self.trains:
+            if t.rear_antenna and not t.route:
+                raise ValueError(f"train {t.id}: a rear antenna needs a route on a layout")
+            if t.stops and not t.route:
+                raise ValueError(f"train {t.id}: stops need a route on a layout")
+        rear = {t.id for t in self.trains if t.rear_antenna}
+        for f in self.faults:
+            if f.kind == "train_split" and f.train not in rear:
+                raise ValueError(f"train_split names train {f.train!r}, which has no rear antenna")
         if self.line is not None:
             for t in self.trains:
                 if not t.route and t.track > self.line.tracks:

@@ -22,6 +22,7 @@ observables and never mixed into them.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,11 +35,11 @@ from augnet.gnss.geometry import ecef_to_geodetic, enu_rotation, geodetic_deg_to
 from augnet.gnss.signals import by_rinex
 from stations import constellation as const
 from stations.ionosphere import IonosphereField, delay_m
-from stations.kinematics import GRID_M, braking_curve, drive, train_motion
+from stations.kinematics import GRID_M, STEP_S, braking_curve, drive, train_motion
 from stations.layout import Layout
 from stations.orbit_errors import OrbitClockErrors
 from stations.receiver_errors import GRADES, NoiseAndMultipath, ReceiverClocks, cnr_dbhz, elevation_scale
-from stations.scenario import RECEIVER_EVENT_FIELDS, Scenario, receiver_events, resolve_ionosphere
+from stations.scenario import RECEIVER_EVENT_FIELDS, Scenario, ScenarioError, receiver_events, resolve_ionosphere
 from stations.track import TrackLine, check_on_line, cutting_mask_rad
 from stations.tracking import Tracking, Unflagged
 from stations.troposphere import WetResidualField, niell, zenith_delays_m
@@ -48,6 +49,12 @@ NOMINAL_TRANSIT_S = 0.075
 BLOCK_EPOCHS = 60  # epochs computed together (vectorised); results do not depend on it
 DOPPLER_NOISE_HZ = 0.02
 ATMO_RATE_STEP_S = 0.5  # half-step of the central difference giving the atmosphere's rate
+# A train's rear antenna (Train.rear_antenna): its receiver's kind and the suffix of its id ("R1.rear"; train
+# ids have no ".", so it cannot clash).
+REAR_KIND = "rear"
+REAR_SUFFIX = ".rear"
+# The train length when the scenario gives none [m]: a CR400AF 8-car set (as augnet.onboard.position_report).
+DEFAULT_TRAIN_LENGTH_M = 209.0
 BURST_SEED_TAG = 0xB0257  # multipath bursts' per-satellite signs: their own stream, no other draw moves
 
 
@@ -104,6 +111,73 @@ class EpochBlock:
 def _system_gm_omge(system: str):
     return {"G": (GM_GPS_M3_S2, OMEGA_E_GPS_RAD_S), "E": (GM_GAL_M3_S2, OMEGA_E_GAL_RAD_S),
             "C": (GM_BDS_M3_S2, OMEGA_E_BDS_RAD_S)}[system]
+
+
+def route_motion(layout: Layout, tr, t_rel: np.ndarray, spacing_m: float = 0.0):
+    """(route, route distance [m], speed [m/s]) of a train's head at times `t_rel` on its layout route: speed
+    limited by the line speed, the scenario's restrictions (by km) and the curves (LATERAL_ACCEL_M_S2); it halts
+    at each of its `stops` for the dwell and at the route's end. The head starts `spacing_m` along the route (a
+    train with a rear antenna stands with its rear at start_km)."""
+    route = layout.route(tr.route, tr.direction, tr.start_km)
+    if spacing_m >= route.length_m:
+        raise ScenarioError(f"train {tr.id}: route {route.length_m:.0f} m, not longer than the train")
+    u = np.arange(0.0, route.length_m + GRID_M, GRID_M)
+    limit = route.speed_limit_m_s(u, tr.speed_kmh / 3.6)
+    km_grid = np.interp(u, route.u_m, route.km)
+    prof = sorted(tr.speed_profile, key=lambda p: p.from_km)
+    for k, p in enumerate(prof):
+        lo, hi = p.from_km, prof[k + 1].from_km if k + 1 < len(prof) else np.inf
+        inside = (km_grid >= lo) & (km_grid < hi)  # as train_motion: from its km to the next entry's
+        limit[inside] = np.minimum(limit[inside], p.speed_kmh / 3.6)
+    limit[-1] = 0.0  # stop at the end of the route
+    sign = 1.0 if tr.direction > 0 else -1.0
+    halts = []
+    for st in tr.stops:
+        if not min(route.km) <= st.km <= max(route.km):
+            raise ScenarioError(f"train {tr.id}: stop at km {st.km} is not on its route")
+        halts.append((float(np.interp(sign * st.km, sign * route.km, route.u_m)), st.dwell_s))
+    halts.append((route.length_m, math.inf))
+    um = np.full(len(t_rel), spacing_m)
+    v = np.zeros(len(t_rel))
+    u0, t0, v0 = spacing_m, 0.0, tr.start_speed_kmh / 3.6
+    t_end = float(np.max(t_rel)) if len(t_rel) else 0.0
+    for u_halt, dwell in sorted(halts):
+        if u_halt <= u0 or t0 > t_end:
+            continue
+        lim = limit.copy()
+        lim[u >= u_halt] = 0.0
+        allowed = braking_curve(u, lim, tr.decel_m_s2)
+        v0 = min(v0, float(np.interp(u0, u, allowed)))
+        tt = np.arange(0.0, t_end - t0 + 2 * STEP_S, STEP_S)
+        uu, vv, _ = drive(u - u0, allowed, u_halt - u0, v0, tr.accel_m_s2, tr.decel_m_s2, tt)
+        arrived = np.flatnonzero(uu >= u_halt - u0 - 1e-6)
+        t_arr = t0 + (float(tt[arrived[0]]) if len(arrived) else math.inf)
+        seg = (t_rel >= t0) & (t_rel < t_arr)
+        um[seg] = u0 + np.interp(t_rel[seg] - t0, tt, uu)
+        v[seg] = np.interp(t_rel[seg] - t0, tt, vv)
+        um[t_rel >= t_arr] = u_halt  # standing until the next leg starts (overwritten by it)
+        v[t_rel >= t_arr] = 0.0
+        u0, t0, v0 = u_halt, t_arr + dwell, 0.0
+    return route, um, v
+
+
+def rear_motion(t_rel: np.ndarray, um: np.ndarray, v: np.ndarray, spacing_m: float, split=None,
+                fault_clock_offset_s: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """The rear antenna's route distance and speed: `spacing_m` behind the head (`um`, `v`), or from a
+    `train_split` fault's time on (its at_s less `fault_clock_offset_s`) slowing at its deceleration to a stand."""
+    ur, vr = um - spacing_m, v.copy()
+    if split is None:
+        return ur, vr
+    t0 = float(split.at_s) - fault_clock_offset_s
+    at = t_rel >= t0
+    if np.any(at):
+        k0 = int(np.argmax(at))
+        u0 = float(np.interp(t0, t_rel, ur))
+        v0 = float(np.interp(t0, t_rel, vr))
+        dt = np.minimum(t_rel[at] - t0, v0 / split.rear_decel_m_s2)  # to a stand
+        ur[k0:] = u0 + v0 * dt - 0.5 * split.rear_decel_m_s2 * dt ** 2
+        vr[k0:] = v0 - split.rear_decel_m_s2 * dt
+    return ur, vr
 
 
 class World:
@@ -242,7 +316,7 @@ class World:
                                 np.zeros((self.n_epochs, 3)), outage=out_mask))
         for j, tr in enumerate(sc.trains):
             if tr.route:
-                out.append(self._route_receiver(tr, j, t_rel))
+                out.extend(self._route_receivers(tr, j, t_rel))
                 continue
             m = train_motion(tr, self.track.length_m, t_rel)
             off = self.track.track_offset_m(tr.track)
@@ -266,23 +340,24 @@ class World:
                                 outage=np.zeros(self.n_epochs, bool)))
         return out
 
-    def _route_receiver(self, tr, j: int, t_rel: np.ndarray) -> Receiver:
+    def _route_receivers(self, tr, j: int, t_rel: np.ndarray) -> list[Receiver]:
         """A train running its route over the layout: speed limited by the line speed, the scenario's
-        restrictions (by km) and the curves (stations.layout.LATERAL_ACCEL_M_S2); it stops at the route's end."""
-        route = self.layout.route(tr.route, tr.direction, tr.start_km)
+        restrictions (by km) and the curves (stations.layout.LATERAL_ACCEL_M_S2); it stops at the route's end.
+        With a rear antenna the train stands with its rear at start_km (the head `length_m` ahead) and a second
+        receiver `<id>.rear` (kind REAR_KIND) runs `length_m` behind the head, or, after a `train_split`, slows
+        at the fault's deceleration to a stand."""
+        spacing = float(tr.length_m or DEFAULT_TRAIN_LENGTH_M) if tr.rear_antenna else 0.0
+        route, um, v = route_motion(self.layout, tr, t_rel, spacing)
         self.routes[tr.id] = route
-        u = np.arange(0.0, route.length_m + GRID_M, GRID_M)
-        limit = route.speed_limit_m_s(u, tr.speed_kmh / 3.6)
-        km_grid = np.interp(u, route.u_m, route.km)
-        prof = sorted(tr.speed_profile, key=lambda p: p.from_km)
-        for k, p in enumerate(prof):
-            lo, hi = p.from_km, prof[k + 1].from_km if k + 1 < len(prof) else np.inf
-            inside = (km_grid >= lo) & (km_grid < hi)  # as train_motion: from its km to the next entry's
-            limit[inside] = np.minimum(limit[inside], p.speed_kmh / 3.6)
-        limit[-1] = 0.0  # stop at the end of the route
-        allowed = braking_curve(u, limit, tr.decel_m_s2)
-        um, v, _ = drive(u, allowed, route.length_m, min(tr.start_speed_kmh / 3.6, allowed[0]), tr.accel_m_s2,
-                         tr.decel_m_s2, t_rel)
+        out = [self._on_route(tr, tr.id, "train", 3000 + j, route, um, v)]
+        if tr.rear_antenna:
+            split = next((f for f in self.scenario.faults if f.kind == "train_split" and f.train == tr.id), None)
+            # the motion is on the scenario's clock (WarmUpWorld delays it), the faults on the world's
+            ur, vr = rear_motion(t_rel, um, v, spacing, split, getattr(self, "warm_up_s", 0.0))
+            out.append(self._on_route(tr, f"{tr.id}{REAR_SUFFIX}", REAR_KIND, 4000 + j, route, ur, vr))
+        return out
+
+    def _on_route(self, tr, rid: str, kind: str, rtcm_id: int, route, um: np.ndarray, v: np.ndarray) -> Receiver:
         xy, z, km, ei, _ = route.at(um)
         ecef = self.layout.plane_to_ecef(xy, z + tr.antenna_height_m)
         xy2, z2, *_ = route.at(um + 0.5)  # 0.5 m ahead: the direction of motion
@@ -293,7 +368,7 @@ class World:
         v_enu = np.einsum("eij,ej->ei", enu_rotation(llh0[:, 0], llh0[:, 1]), unit)
         zeros = np.zeros(self.n_epochs)
         edges = np.array(route.edges, dtype=object)[ei]
-        return Receiver(tr.id, "train", 3000 + j, tr.grade, ecef, unit * v[:, None],
+        return Receiver(rid, kind, rtcm_id, tr.grade, ecef, unit * v[:, None],
                         track_id=self.layout.edges[route.edges[0]].track, km=km, speed_m_s=v,
                         swept_mask_deg=zeros.copy(), cutting_deg=zeros.copy(),
                         heading_rad=np.arctan2(v_enu[:, 0], v_enu[:, 1]), outage=np.zeros(self.n_epochs, bool),

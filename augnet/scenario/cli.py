@@ -164,3 +164,47 @@ def track_id_cmd(scenario: str = typer.Argument("alpha-beta", help="a scenario w
         json_out.write_text(json.dumps(totals, indent=1))
     if wrong:
         raise typer.Exit(1)
+
+
+@app.command("integrity")
+def integrity_cmd(scenario: str = typer.Argument("alpha-beta-integrity", help="a layout scenario whose trains "
+                                                                          "have rear antennas"),
+                  seeds: str = typer.Option("16-25", "--seeds", help="seeds FROM-TO (inclusive)"),
+                  split: bool = typer.Option(False, "--split", help="one train_split per train and run"),
+                  window: str = typer.Option("20-30", "--window", help="split times drawn in FROM-TO [s]"),
+                  decel: Optional[List[float]] = typer.Option(None, "--decel", help="rear deceleration(s) "
+                                                                                    "[m/s^2], taken in turn"),
+                  train: Optional[List[str]] = typer.Option(None, "--train", help="split only these trains"),
+                  warm_up: float = typer.Option(60.0, "--warm-up", help="seconds the centre runs before the trains"),
+                  json_out: Optional[Path] = typer.Option(None, "--json", help="also write the totals here")) -> None:
+    """Train integrity from two antennas in the full chain: false alarms (fault-free) or split detection times."""
+    import json
+
+    from augnet.scenario.runner import load
+    from augnet.scenario.train_integrity import SPLIT_DECEL_M_S2, run, totals
+
+    try:
+        sc = load(scenario)
+        a, _, b = seeds.partition("-")
+        seed_list = list(range(int(a), int(b or a) + 1))
+        w0, _, w1 = window.partition("-")
+        win = (float(w0), float(w1 or w0))
+    except (ScenarioError, ValueError) as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2) from None
+
+    def progress(seed, res):
+        for r in res:
+            typer.echo(f"seed {seed} {r.train}: confirmed {r.confirmed} / {r.epochs}, lost {r.lost}, split "
+                       f"{r.split_at_s:g} s ({r.split_decel_m_s2:g} m/s^2), lost at {r.lost_at_s:g} s, gap at the "
+                       f"alarm {r.gap_at_alarm_m:.2f} m, fault-free |error| max {r.max_error_fault_free_m:.3f} m "
+                       f"({r.max_ratio_fault_free:.2f} of the bound)")
+
+    args = {"window_s": win, "decels_m_s2": tuple(decel) if decel else SPLIT_DECEL_M_S2, "trains": train or None}
+    runs = run(sc, seed_list, split=split, warm_up_s=warm_up, progress=progress, **(args if split else {}))
+    tot = totals(runs)
+    typer.echo(json.dumps(tot))
+    if json_out is not None:
+        json_out.write_text(json.dumps(tot, indent=1))
+    if tot["false_alarms"] or tot["missed"]:
+        raise typer.Exit(1)

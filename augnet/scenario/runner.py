@@ -60,6 +60,7 @@ from augnet.scenario.latency import LatencyModel
 from augnet.scenario.observations import RoverObservations, StationObservations
 from augnet.scenario.truth import TruthIndex
 from augnet.track.topology import Topology
+from augnet.track.train_integrity import AntennaFix, IntegrityMonitor, IntegrityState
 from ntrip_caster.gga import parse_gga
 from ntrip_caster.reposition import RepositionPolicy
 from stations import constellation as const
@@ -67,7 +68,7 @@ from stations.odometer import OdometerStreams, simulate_odometers
 from stations.rtcm_stream import RtcmStreams
 from stations.scenario import Scenario, ScenarioError, load_scenario
 from stations.trackmap_export import track_database
-from stations.world import EpochBlock, Receiver, World
+from stations.world import DEFAULT_TRAIN_LENGTH_M, REAR_KIND, REAR_SUFFIX, EpochBlock, Receiver, World
 
 GGA_INTERVAL_S = DEFAULT_GGA_INTERVAL_S  # the onboard NTRIP client's GGA upload period
 # Receivers whose id starts with this are check points (static receivers at surveyed points inside the
@@ -157,7 +158,7 @@ class WarmUpWorld(World):
             return b
 
         for r in out:
-            if r.kind != "train":
+            if r.kind not in ("train", REAR_KIND):
                 continue
             # super() moved the train from the world's start; move it from the scenario's start instead
             r.ecef = later(r.ecef)
@@ -229,6 +230,14 @@ class TrainLog:
     fused: dict[str, list[FusedPosition]] = field(default_factory=dict)
     # timer-based virtual balise passages from the weighted median (augnet.onboard.balise_timer)
     timed_balises: ListTimerSink = field(default_factory=ListTimerSink)
+    # train integrity (Train.rear_antenna): the rear antenna's map match and the monitor's state per epoch
+    length_m: float = math.nan  # train data: the antenna spacing the monitor checks
+    rear_track: list[str] = field(default_factory=list)
+    rear_km: list[float] = field(default_factory=list)
+    rear_status: list[int] = field(default_factory=list)
+    rear_along_pl_m: list[float] = field(default_factory=list)
+    integrity: list[IntegrityState] = field(default_factory=list)
+    truth_rear_route_m: list[float] = field(default_factory=list)  # truth: the rear antenna's route distance
     session_opened_s: float = math.nan
     vrs_moves: int = 0
     gga_sent: int = 0
@@ -285,6 +294,9 @@ class _Train:
     policy: RepositionPolicy
     fusions: dict[str, AlongTrackFusion] = field(default_factory=dict)
     timer: TimedBaliseDetector | None = None
+    rear_row: int | None = None  # the rear antenna's receiver row (Train.rear_antenna)
+    rear_unit: OnboardUnit | None = None  # its positioning, on the same corrections as the head's
+    integrity: IntegrityMonitor | None = None
     base: EpochObs | None = None
     base_station_id: int | None = None
     last_gga_t: float = -math.inf
@@ -319,10 +331,11 @@ class Chain:
         # correction_bound: the VRS carry the centre's 4001 bound, which the trains take into their PLs (0281)
         self.engine = CentreEngine(self.stations, world.t0, network_name=sc.name, correction_bound=correction_bound)
         self.track_db = None
+        self.topology = None
         if world.layout is not None:
             # the as-built layout exported from the simulator's truth (as track_database does for a line)
-            self.track_db = TrackDatabase.from_dict(
-                Topology.from_dict(world.layout.truth_topology_dict()).to_track_database_dict())
+            self.topology = Topology.from_dict(world.layout.truth_topology_dict())
+            self.track_db = TrackDatabase.from_dict(self.topology.to_track_database_dict())
         elif sc.line is not None:
             self.track_db = TrackDatabase.from_dict(track_database(sc))
         self.trains: dict[str, _Train] = {}
@@ -358,6 +371,19 @@ class Chain:
                 groups = [BaliseGroup(b.id, b.track, b.km * 1000.0, b.telegram, b.linked) for b in self.track_db.balises]
                 self.trains[r.id].timer = TimedBaliseDetector(groups, log.timed_balises,
                                                               k=gaussian_k(unit.integrity_risk))
+        rows = {r.id: i for i, r in enumerate(rx)}
+        for tid, tr in self.trains.items():
+            i = rows.get(tid + REAR_SUFFIX)
+            if i is None:
+                continue
+            cfg = train_cfg[tid]
+            tr.rear_row = i
+            tr.rear_unit = OnboardUnit(world.nav, np.zeros(3), self.track_db, ListSink(),
+                                       dataclasses.replace(self.options))
+            tr.rear_unit.rtk.base_is_vrs = True
+            tr.log.length_m = float(cfg.length_m or DEFAULT_TRAIN_LENGTH_M)
+            # the onboard map as a topology (the monitor walks its edges through the switches)
+            tr.integrity = IntegrityMonitor(self.topology, tr.log.length_m, "up" if cfg.direction > 0 else "down")
         self.baselines = {s.name: BaselineLog(s.name, s.name_a, s.name_b, s.length_m)
                           for s in self.engine.network.solvers.values()}
         self.interpolation: dict[str, list[float]] = {p: [] for p in [*self.trains, *self.check_points]}
@@ -538,9 +564,13 @@ class Chain:
                     continue
                 if tr.decoder.station_id != tr.base_station_id:
                     tr.unit.set_base_position(tr.decoder.base_position_m)  # a new session: a new base
+                    if tr.rear_unit is not None:
+                        tr.rear_unit.set_base_position(tr.decoder.base_position_m)
                     tr.base_station_id = tr.decoder.station_id
                 elif move_base(tr.unit, tr.decoder.base_position_m):
                     log.vrs_moves += 1
+                    if tr.rear_unit is not None:
+                        move_base(tr.rear_unit, tr.decoder.base_position_m)
                 tr.base = ep
         rover = self.rover_obs.epoch(blk, e, tr.row)
         out = tr.unit.step(rover, tr.base, tr.decoder.bounds)
@@ -571,6 +601,8 @@ class Chain:
             log.truth_edge.append(str(rx.edge[int(blk.epoch_index[e])]))
             log.truth_route_m.append(float(rx.route_m[int(blk.epoch_index[e])]))
         self._fuse(tr, t, int(blk.epoch_index[e]), sol, m)
+        if tr.rear_unit is not None:
+            self._rear_epoch(tr, blk, e, t, m)
         # GGA upstream: open the VRS session, and let the caster's policy move it
         if sol.status == Status.NONE or t - tr.last_gga_t < GGA_INTERVAL_S:
             return
@@ -587,6 +619,20 @@ class Chain:
         elif tr.policy.due(t, fix):
             self.engine.move_session(log.id, fix.lat_deg, fix.lon_deg, fix.height_m)
             tr.policy.applied(t, fix)
+
+    def _rear_epoch(self, tr: _Train, blk: EpochBlock, e: int, t: float, head_match) -> None:
+        """The rear antenna's solution on the head's corrections (one radio, two receivers), and the integrity
+        monitor on the two map matches."""
+        log = tr.log
+        rout = tr.rear_unit.step(self.rover_obs.epoch(blk, e, tr.rear_row), tr.base, tr.decoder.bounds)
+        rm = rout.match
+        log.rear_status.append(int(rout.solution.status))
+        log.rear_track.append(rm.track if (rm is not None and rm.track) else "")
+        log.rear_km.append(float(rm.km) if (rm is not None and rm.track) else math.nan)
+        log.rear_along_pl_m.append(rm.along_pl_m if rm is not None else math.inf)
+        rrx = self.world.receivers[tr.rear_row]
+        log.truth_rear_route_m.append(float(rrx.route_m[int(blk.epoch_index[e])]))
+        log.integrity.append(tr.integrity.update(t - self.t0, antenna_fix(head_match), antenna_fix(rm)))
 
     def _fuse(self, tr: _Train, t: float, epoch: int, sol, m) -> None:
         """Every method's along-track position at t from this epoch's map-matched fix and odometer reading."""
@@ -643,6 +689,13 @@ class Chain:
                       world_epochs=self.world_epochs, age_limit_s=opt.max_age_s,
                       min_rtk_satellites=opt.min_fix_ambiguities + 1, t0=self.t0,
                       line_length_m=self.world.track.length_m if self.world.track is not None else math.nan)
+
+
+def antenna_fix(m) -> AntennaFix | None:
+    """A map match as the integrity monitor's input (None without a track or a finite along-track PL)."""
+    if m is None or not m.track or not math.isfinite(m.km) or not math.isfinite(m.along_pl_m):
+        return None
+    return AntennaFix(m.track, float(m.km), float(m.along_pl_m))
 
 
 def simulate(scenario: str | Path | Scenario, *, duration_s: float | None = None,

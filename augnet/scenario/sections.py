@@ -14,7 +14,7 @@ import math
 from dataclasses import dataclass, field
 
 from augnet.onboard.position_report import DEFAULT_TRAIN_LENGTH_M, ReportBuilder, encode
-from augnet.system.section_service import SectionEvent, SectionService, stations_of
+from augnet.system.section_service import SectionEvent, SectionService, StationArea, stations_of
 
 
 @dataclass
@@ -27,11 +27,34 @@ class SectionReplay:
     transitions: list[tuple[SectionEvent, float]] = field(default_factory=list)
 
 
-def replay(log, length_m: float = DEFAULT_TRAIN_LENGTH_M) -> SectionReplay:
+def layout_stations(topology) -> tuple[list[StationArea], float]:
+    """The station areas of a track topology and the line's length [km]: a station's area is the stretch between
+    the section boundaries (or the line's ends) that holds its tracks (its edges' `station`)."""
+    lo = min(e.km_begin for e in topology.edges.values())
+    hi = max(e.km_end for e in topology.edges.values())
+    cuts = sorted({lo, hi, *(b.km for b in topology.sections.values())})
+    areas: dict[str, list[float]] = {}
+    for e in topology.edges.values():
+        if not e.station:
+            continue
+        mid = 0.5 * (e.km_begin + e.km_end)
+        k = max(i for i, c in enumerate(cuts[:-1]) if c <= mid)
+        a = areas.setdefault(e.station, [cuts[k], cuts[k + 1]])
+        a[0], a[1] = min(a[0], cuts[k]), max(a[1], cuts[k + 1])
+    return [StationArea(n, a, b) for n, (a, b) in sorted(areas.items(), key=lambda x: x[1][0])], hi
+
+
+def replay(log, length_m: float | None = None, stations: list[StationArea] | None = None,
+           line_length_km: float | None = None) -> SectionReplay:
+    """`stations` / `line_length_km`: the station areas and the line's length (default: the scenario line's).
+    A train's length and, with a rear antenna, its integrity state per epoch come from its log."""
     sc = log.scenario
-    service = SectionService(stations_of(sc), log.line_length_m / 1000.0)
+    service = SectionService(stations_of(sc) if stations is None else stations,
+                             log.line_length_m / 1000.0 if line_length_km is None else line_length_km)
     rep = SectionReplay(service)
-    builders = {tid: ReportBuilder(tid, length_m) for tid in log.trains}
+    builders = {tid: ReportBuilder(tid, length_m or (tl.length_m if math.isfinite(tl.length_m)
+                                                       else DEFAULT_TRAIN_LENGTH_M))
+                for tid, tl in log.trains.items()}
     index = {tid: {round(t, 3): i for i, t in enumerate(tl.t_s)} for tid, tl in log.trains.items()}
     times = sorted({round(t, 3) for tl in log.trains.values() for t in tl.t_s})
     for t in times:
@@ -44,6 +67,8 @@ def replay(log, length_m: float = DEFAULT_TRAIN_LENGTH_M) -> SectionReplay:
             if not tl.track[i] or not math.isfinite(tl.km[i]):
                 continue
             age = tl.age_s[i]
+            if tl.integrity:
+                builders[tid].integrity = tl.integrity[i].status
             r = builders[tid].build(sc_time(log, t), tl.track[i], tl.km[i],
                                     correction_age_s=age if math.isfinite(age) else None,
                                     along_pl_m=_finite(tl.along_pl_m[i]), cross_pl_m=_finite(tl.cross_pl_m[i]),
@@ -86,4 +111,4 @@ def _past_boundary_m(service: SectionService, ev: SectionEvent, truth_km: float)
     return (truth_km - boundary) * 1e3 * (1 if up else -1)
 
 
-__all__ = ["SectionReplay", "replay"]
+__all__ = ["SectionReplay", "layout_stations", "replay"]

@@ -21,6 +21,13 @@ to no line section (its interlocking routes trains across it). A train that over
 loop is removed from the section before the station in arrival order and inserted into the section
 after it in departure order; the register never reorders itself (decision 0292).
 
+Train integrity (decision 0293): each record carries `rear_km`, the chainage down to which the train occupies
+the track behind it. The register sets it: the train's front minus its length while the train reports its
+integrity "confirmed"; frozen at the last confirmed rear while it reports "lost" or "unknown"; the section's
+entry when it never confirmed one in this section (the whole section behind it stays occupied). A train
+leaving through the exit keeps its section occupied (`left_behind`) down to that rear until a report with
+confirmed integrity puts its rear past the exit (`release`) or a dispatcher clears it (`clear_behind`).
+
 Every refused change raises `RegisterError` whose `code` says which rule it broke (`REFUSALS`).
 """
 
@@ -105,6 +112,8 @@ class TrainRecord:
     cross_pl_m: float | None
     hpl_m: float | None
     time_s: float = 0.0  # GPS time of the report [s]
+    # chainage down to which the train occupies the track behind it [km]: set by the register (module docstring)
+    rear_km: float | None = None
 
     def check(self) -> None:
         if not self.train_id or self.integrity not in INTEGRITY_STATES or self.length_m <= 0 or self.speed_m_s < 0:
@@ -150,6 +159,8 @@ class SectionQueue:
         self.front: _Node | None = None
         self.rear: _Node | None = None
         self.nodes: dict[str, _Node] = {}
+        # trains that left through the exit without their rear confirmed past it: train -> rear_km
+        self.left_behind: dict[str, float] = {}
         self.version = 0  # changes of membership or order (insert, remove, dispatcher actions)
 
     def __iter__(self) -> Iterator[TrainRecord]:
@@ -173,6 +184,25 @@ class SectionQueue:
 
     def distance_from_entry_m(self, km: float) -> float:
         return (km - self.section.entry_km(self.direction)) * 1e3 * (1 if self.direction == "up" else -1)
+
+    def with_rear(self, record: TrainRecord, previous: TrainRecord | None) -> TrainRecord:
+        """`record` with the register's `rear_km` (module docstring): confirmed -> front minus length; else the
+        previous record's rear, or the section's entry."""
+        if record.integrity == "confirmed":
+            rear = record.km - (record.length_m / 1e3 if self.direction == "up" else -record.length_m / 1e3)
+        elif previous is not None and previous.rear_km is not None:
+            rear = previous.rear_km
+        else:
+            rear = self.section.entry_km(self.direction)
+        return dataclasses.replace(record, rear_km=rear)
+
+    def occupied_from_km(self) -> float | None:
+        """The chainage farthest back (towards the entry) that a train of this queue, or one that left it,
+        still occupies; None when nothing occupies the section."""
+        rears = [r.rear_km for r in self if r.rear_km is not None] + list(self.left_behind.values())
+        if not rears:
+            return None
+        return min(rears) if self.direction == "up" else max(rears)
 
     # -- list operations (the rules are checked by SectionRegister) --
     def _push_rear(self, record: TrainRecord) -> None:
@@ -256,7 +286,7 @@ class SectionRegister:
         if q.rear is not None and not q.ahead_of(q.rear.record.km, record.km):
             raise RegisterError("middle-insert", f"{record.train_id} at km {record.km:.3f} is not behind the "
                                                  f"rear train {q.rear.record.train_id} at km {q.rear.record.km:.3f}")
-        q._push_rear(record)
+        q._push_rear(q.with_rear(record, None))
         q.version += 1
         self._where[record.train_id] = (section_id, direction)
 
@@ -274,9 +304,45 @@ class SectionRegister:
             raise RegisterError("not-at-exit", f"{train_id} is {q.distance_to_exit_m(q.front.record.km):.0f} m "
                                                "before the exit")
         rec = q._unlink(train_id)
+        if rec.rear_km is not None and q.distance_to_exit_m(rec.rear_km) > 0:
+            q.left_behind[train_id] = rec.rear_km  # its rear is (or may be) still in the section
         q.version += 1
         del self._where[train_id]
         return rec
+
+    def release(self, record: TrainRecord) -> list[tuple[int, str]]:
+        """A report of a train that left sections with their track behind it still occupied: each such section
+        is released once the report's integrity is confirmed and its rear (front minus length) is past the
+        exit; a confirmed rear still inside moves the occupancy on. Returns the sections released or moved."""
+        changed = []
+        for key, q in self.queues.items():
+            rear = q.left_behind.get(record.train_id)
+            if rear is None or record.integrity != "confirmed":
+                continue
+            new_rear = q.with_rear(record, None).rear_km
+            if q.distance_to_exit_m(new_rear) <= 0:
+                del q.left_behind[record.train_id]
+            elif q.ahead_of(new_rear, rear):
+                q.left_behind[record.train_id] = new_rear
+            else:
+                continue
+            q.version += 1
+            changed.append(key)
+        return changed
+
+    def clear_behind(self, section_id: int, direction: str, train_id: str, authority: Authority | None,
+                     reason: str) -> AuditRecord:
+        """A dispatcher releases the track a departed train left occupied behind it (the rear part found and
+        cleared, or the train's integrity confirmed by other means)."""
+        q = self.queue(section_id, direction)
+        self._check_authority(authority, reason)
+        if train_id not in q.left_behind:
+            raise RegisterError("unknown-train", f"{train_id} holds nothing behind it in section {section_id} "
+                                                 f"{direction}")
+        del q.left_behind[train_id]
+        q.version += 1
+        return AuditRecord(authority.name, "section.clear_behind", _target(section_id, direction), reason,
+                           (train_id,), ())
 
     def update(self, record: TrainRecord) -> None:
         """A train's new report: its record changes, its place in the queue never does."""
@@ -293,7 +359,7 @@ class SectionRegister:
         if node.behind is not None and not q.ahead_of(record.km, node.behind.record.km):
             raise RegisterError("order-conflict", f"{record.train_id} at km {record.km:.3f} would fall behind "
                                                   f"{node.behind.record.train_id} at km {node.behind.record.km:.3f}")
-        node.record = record
+        node.record = q.with_rear(record, node.record)
 
     # -- dispatcher actions (each returns the audit record) --
     def reorder(self, section_id: int, direction: str, order: list[str], authority: Authority | None,
@@ -322,7 +388,7 @@ class SectionRegister:
         if any(r.km == record.km for r in records):
             raise RegisterError("order-conflict", f"{record.train_id} at the same km as another train")
         i = sum(1 for r in records if q.ahead_of(r.km, record.km))
-        q._rebuild(records[:i] + [record] + records[i:])
+        q._rebuild(records[:i] + [q.with_rear(record, None)] + records[i:])
         q.version += 1
         self._where[record.train_id] = (section_id, direction)
         return AuditRecord(authority.name, "section.admit", _target(section_id, direction), reason, before, q.ids())
@@ -367,7 +433,8 @@ class SectionRegister:
             s = q.section
             out.append({"section": sid, "name": s.name, "direction": d, "km_begin": s.km_begin, "km_end": s.km_end,
                         "entry": s.entry_station(d), "exit": s.exit_station(d), "version": q.version,
-                        "trains": [dataclasses.asdict(r) for r in q]})
+                        "trains": [dataclasses.asdict(r) for r in q], "left_behind": dict(q.left_behind),
+                        "occupied_from_km": q.occupied_from_km()})
         return out
 
 

@@ -116,6 +116,8 @@ class SectionService:
             self.stats["reports_without_position"] += 1
             return
         rec = record_of(r)
+        for key in self.register.release(rec):  # the track it left occupied behind it (integrity, 0293)
+            self._dirty.add(key)
         at = self.register.where(r.train_id)
         if at is not None:
             q = self.register.queue(*at)
@@ -215,6 +217,12 @@ class SectionService:
                  reason: str) -> AuditRecord:
         audit = self.register.withdraw(section_id, direction, train_id, authority, reason)
         self._held.add(train_id)
+        self._dirty.add((section_id, direction))
+        return audit
+
+    def clear_behind(self, section_id: int, direction: str, train_id: str, authority: Authority | None,
+                     reason: str) -> AuditRecord:
+        audit = self.register.clear_behind(section_id, direction, train_id, authority, reason)
         self._dirty.add((section_id, direction))
         return audit
 

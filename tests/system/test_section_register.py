@@ -145,3 +145,51 @@ def test_overtaking_on_a_loop_goes_through_the_station(reg):
     reg.insert(3, "up", rec("S", 102.1, speed=10.0), by="B")
     assert [r.train_id for r in reg.trains(3, "up")] == ["F", "S"]
     refused("not-entry-side", reg.insert, 3, "up", rec("X", 102.1), by="A")
+
+
+def irec(tid, km, integrity, length=209.0):
+    return TrainRecord(tid, "L1-1", km, 50.0, length, integrity, 0.8, 0.4, 0.3, 0.5)
+
+
+def test_rear_follows_confirmed_integrity_and_freezes_without_it(reg):
+    reg.insert(2, "up", irec("T1", 52.3, "unknown"), by="A")
+    assert reg.record("T1").rear_km == 52.0  # never confirmed: the whole section behind it stays occupied
+    reg.update(irec("T1", 60.0, "confirmed"))
+    assert reg.record("T1").rear_km == pytest.approx(60.0 - 0.209)
+    reg.update(irec("T1", 61.0, "lost"))
+    assert reg.record("T1").rear_km == pytest.approx(60.0 - 0.209)  # frozen at the last confirmed rear
+    reg.update(irec("T1", 62.0, "unknown"))
+    assert reg.record("T1").rear_km == pytest.approx(60.0 - 0.209)
+    assert reg.queue(2, "up").occupied_from_km() == pytest.approx(59.791)
+    reg.insert(2, "down", irec("D1", 99.9, "confirmed", length=400.0), by="B")
+    assert reg.record("D1").rear_km == pytest.approx(100.3)  # down: the rear is at the higher chainage
+
+
+def test_a_train_leaving_without_confirmed_integrity_keeps_the_section_occupied(reg):
+    reg.insert(2, "up", irec("T1", 52.3, "confirmed"), by="A")
+    reg.update(irec("T1", 90.0, "confirmed"))
+    reg.update(irec("T1", 95.0, "lost"))  # split: the rear is somewhere behind km 89.791
+    reg.update(irec("T1", 99.9, "lost"))
+    reg.remove(2, "up", "T1", by="B")
+    q = reg.queue(2, "up")
+    assert len(q) == 0 and q.left_behind == {"T1": pytest.approx(89.791)}
+    assert q.occupied_from_km() == pytest.approx(89.791)
+    assert reg.release(irec("T1", 101.0, "lost")) == []  # still lost: nothing released
+    refused("no-authority", reg.clear_behind, 2, "up", "T1", None, "rear found")
+    refused("no-authority", reg.clear_behind, 2, "up", "T1", DISPATCHER, " ")
+    refused("unknown-train", reg.clear_behind, 2, "up", "T9", DISPATCHER, "rear found")
+    audit = reg.clear_behind(2, "up", "T1", DISPATCHER, "rear part recovered")
+    assert audit.action == "section.clear_behind" and audit.before == ("T1",)
+    assert q.occupied_from_km() is None
+
+
+def test_a_confirmed_rear_past_the_exit_releases_the_section(reg):
+    reg.insert(2, "up", irec("T1", 52.3, "confirmed"), by="A")
+    reg.update(irec("T1", 99.95, "confirmed"))
+    reg.remove(2, "up", "T1", by="B")
+    q = reg.queue(2, "up")
+    assert q.left_behind == {"T1": pytest.approx(99.741)}  # its last 209 m are still in the section
+    assert reg.release(irec("T1", 100.1, "confirmed")) == [(2, "up")]  # rear at 99.891: moved on
+    assert q.left_behind == {"T1": pytest.approx(99.891)}
+    assert reg.release(irec("T1", 100.25, "confirmed")) == [(2, "up")]  # rear at 100.041: past the exit
+    assert q.left_behind == {} and q.occupied_from_km() is None

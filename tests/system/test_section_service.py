@@ -194,3 +194,21 @@ def test_the_systems_flush_sends_changed_sections_to_the_rbc_and_the_store(svc):
     assert len(system.rbc.centre.section_trains) == 6
     (pic,) = decode_payload(system.rbc.centre.section_trains[(3, 1)]).messages
     assert [t.train_id for t in pic.trains] == ["D1"]
+
+
+def test_a_split_train_keeps_the_section_behind_it_until_confirmed_again(svc):
+    """T1 confirms its integrity in section 2, loses it (split), arrives at B: section 2 stays occupied from its
+    last confirmed rear; only a confirmed report with the rear past B's entry releases it."""
+    svc.on_report(report("T1", 0, 51.0))
+    svc.on_report(report("T1", 1, 52.2, integrity="confirmed"))
+    svc.on_report(report("T1", 50, 90.0, integrity="confirmed"))
+    svc.on_report(report("T1", 60, 95.0, integrity="lost"))
+    svc.take_dirty()
+    svc.on_report(report("T1", 80, 100.1, integrity="lost"))  # B removes it
+    q = svc.register.queue(2, "up")
+    assert svc.register.where("T1") is None and q.left_behind == {"T1": pytest.approx(89.791)}
+    svc.on_report(report("T1", 81, 100.5, integrity="lost"))
+    assert q.occupied_from_km() == pytest.approx(89.791)
+    svc.take_dirty()
+    svc.on_report(report("T1", 90, 101.0, integrity="confirmed"))  # rear at 100.791: past the exit
+    assert q.left_behind == {} and (2, "up") in svc.take_dirty()
