@@ -40,6 +40,7 @@ from augnet.centre.network import MEMBERSHIP_KIND, MembershipChange, NetworkEpoc
 from augnet.centre.service_area import AreaAlarm, AreaAnswer, AreaConfig, ServiceArea, refusal_message
 from augnet.centre.vrs import VrsEpoch, VrsPlan, synthesize
 from augnet.centre.vrs_admission import AdmissionBatch, AdmissionConfig, fixed_somewhere
+from augnet.centre.vrs_handover import MasterHandover
 from augnet.centre.vrs_stream import VrsStreamEncoder
 from augnet.gnss.antex import AntexFile, read_antex
 from augnet.gnss.geometry import ecef_to_enu
@@ -125,6 +126,7 @@ class CentreEngine:
         estimate = correction_bound if estimate_correction_bound is None else estimate_correction_bound
         self.correction_bound = CorrectionBound() if estimate or correction_bound else None
         self.admission = AdmissionBatch(admission)  # per session: when newly corrected satellites enter its VRS
+        self.handover = MasterHandover()  # per session: its phase kept continuous across master changes (0223)
         self.sessions: dict[str, Session] = {}
         self._station_ids = itertools.count(FIRST_VRS_STATION_ID)
         self.outbox: list[tuple[str, bytes]] = []  # (bus subject, payload) for the service to publish
@@ -326,6 +328,7 @@ class CentreEngine:
         self.sessions.pop(client_id, None)
         self.encoder.remove(client_id)
         self.admission.remove(client_id)
+        self.handover.remove(client_id)
 
     # --- processing -----------------------------------------------------------------------------
 
@@ -385,8 +388,10 @@ class CentreEngine:
             t0, c0 = time.perf_counter(), time.process_time()
             points = np.array([self.sessions[c].point_ecef for c in ids])
             vrs = synthesize(ne, {k: v for k, v in eps.items() if v is not None}, points, self.nav,
-                             plan=self._plan, keys=ids)
+                             plan=self._plan, keys=ids, masters=self.handover.masters)
             self._plan = None
+            if vrs is not None:
+                self.handover.apply(ids, vrs, ne)
             if vrs is not None and self.admission.config.admission:
                 self._admit(ids, ne, vrs)
             t1 = time.perf_counter()
@@ -442,7 +447,7 @@ class CentreEngine:
         it does not carry (yet) are left out, and at its moments every satellite it carries is flagged
         loss-of-lock."""
         corrected = vrs.corrected & np.isin(vrs.sats.astype(str), list(fixed_somewhere(ne)))[None, :]
-        carried, moment = self.admission.step(vrs.t_gpst, ids, vrs.sats, corrected, vrs.master)
+        carried, moment = self.admission.step(vrs.t_gpst, ids, vrs.sats, corrected, vrs.master, vrs.handed_over)
         # not a network VRS (too few corrected): the session gets its fallback as synthesised, as `augnet vrs`
         # writes its single-base epoch then
         out = vrs.corrected & ~carried & carried.any(axis=1)[:, None]
@@ -468,7 +473,7 @@ class CentreEngine:
             self._plan = None
             return
         eps = {k: v for k, v in self._last_eps.items() if v is not None}
-        plan = VrsPlan(ne, self.nav, ne.t_gpst + self._interval_s, list(eps))
+        plan = VrsPlan(ne, self.nav, ne.t_gpst + self._interval_s, list(eps), masters=self.handover.masters)
         ids = list(self.sessions)
         plan.rows_for(np.array([self.sessions[c].point_ecef for c in ids]), ids)
         plan.add_sats(sorted({str(s) for e in eps.values() for s in e.sats} - set(ne.excluded)))

@@ -237,14 +237,17 @@ class AdmissionBatch:
         enough = ((counts - 1) * systems).sum(axis=1) >= self._min_dd
         return corrected & systems[:, self._col_system[:corrected.shape[1]]] & enough[:, None]
 
-    def step(self, t: float, keys: list, sats, corrected: np.ndarray, masters: list | None = None):
+    def step(self, t: float, keys: list, sats, corrected: np.ndarray, masters: list | None = None,
+             handed_over: np.ndarray | None = None):
         """One epoch at `t` [s] for the sessions `keys`: `corrected` (sessions x `sats`) their network-corrected
-        satellites; `masters` (one per session) their master stations (a change is a moment for the waiting).
+        satellites; `masters` (one per session) their master stations (a change is a moment for the waiting,
+        unless the session's VRS was handed over to the new master, `handed_over`: its locks continue).
         Returns (carried (sessions x sats) bool, moment (sessions,) bool)."""
         cfg = self.config
         sat_cols = np.array([self._col(str(s)) for s in sats], dtype=int)
         if masters is not None:
-            changed_master = [k for k, m in zip(keys, masters) if self._masters.get(k, m) != m]
+            kept = [False] * len(keys) if handed_over is None else [bool(h) for h in handed_over]
+            changed_master = [k for k, m, h in zip(keys, masters, kept) if self._masters.get(k, m) != m and not h]
             if changed_master:
                 self.restart(changed_master)
             self._masters.update(zip(keys, masters))
