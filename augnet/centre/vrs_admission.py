@@ -14,7 +14,8 @@ An admission moment is held when satellites wait and
   * the VRS is not a network VRS yet (single-base, or the start) but would be with them: as soon as the set is
     ready (below), without waiting for the interval;
   * it was a network VRS and without them no longer would be (the network lost satellites): at once;
-  * the VRS changes its master station (every satellite restarts anyway): at once;
+  * the VRS changes its master station (every satellite restarts anyway): at once; not when the VRS was handed
+    over to the new master (vrs_handover.py, decision 0223: its satellites keep their locks);
   * otherwise at least `interval_s` after the last moment, once ready;
 where ready is: the corrected set has not changed for `settle_s` (the network has fixed what it was about to
 fix), or `min_satellites` wait (entering: are corrected), or a satellite has waited `max_wait_s`.

@@ -475,7 +475,8 @@ NETWORK_EPOCH = _Record(NetworkEpoch, (
     ("refs", _Dict(STR, STR)), ("sats", ARRAY), ("dd_iono_m", ARRAY), ("dd_trop_m", ARRAY),
     ("baselines", _Dict(STR, _Optional(BASELINE_EPOCH))), ("misclosures", I64), ("present", STRS),
     ("clocks", _Dict(STR, F64)), ("excluded", _List(STR, set)), ("alarms", _List(ALARM))),
-    left_behind={"antenna_m": {}})  # the stations' antenna corrections serve the centre's own VRS synthesis
+    # the stations' antenna corrections and the chained DD integers serve the centre's own VRS synthesis
+    left_behind={"antenna_m": {}, "dd_n": None})
 # `vrs` (every session's synthesised observations) stays in the centre; `vrs_models` is what the console
 # shows of it
 EPOCH_REPORT = _Record(EpochReport, (
