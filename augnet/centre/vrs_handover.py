@@ -35,55 +35,89 @@ MAX_GAP_S = 5.0
 LLI_LOSS_OF_LOCK = 1  # RINEX LLI bit 0: what the stream encoder restarts a lock on
 
 
+def _capacity(have: int, need: int, least: int) -> int:
+    """An array axis's new length: unchanged while it holds `need`, else doubled (amortised growth)."""
+    return have if need <= have else max(need, 2 * have, least)
+
+
 class MasterHandover:
     """Per session (key): its master, its phase offsets since its last restart, and last epoch's phase minus
-    code; `apply` hands each changed session over, in place on the VRS epoch."""
+    code; `apply` hands each changed session over, in place on the VRS epoch. Sessions x satellites as dense
+    arrays (a row per session, a column per satellite ever seen), so that thousands of sessions cost a few
+    array operations per epoch; only a handover walks its satellites."""
 
     def __init__(self):
         self.masters: dict = {}  # key -> master station of the last epoch
-        self._offsets: dict = {}  # key -> {satellite: (2,) cycles subtracted from the VRS phase}
-        self._last: dict = {}  # key -> (t, {satellite: ((2,) phase minus code [m], (2,) codes)})
+        self._rows: dict = {}  # key -> row
+        self._free_rows: list[int] = []
+        self._cols: dict[str, int] = {}  # satellite -> column
+        self._off = np.zeros((0, 0, 2))  # cycles subtracted from the VRS phase (0: none)
+        self._phi = np.full((0, 0, 2), np.nan)  # last epoch's phase minus code [m] (NaN: not sent)
+        self._codes = np.full((0, 0, 2), "", dtype="<U2")  # ... and its signals
+        self._t = np.full(0, np.nan)  # ... and its time
         self._ints: list = []  # the last two network epochs' (stations, sats, dd_n)
         self.kept = 0  # satellites handed over (for the log and the tests)
         self.restarted = 0  # satellites restarted at a handover
 
+    def _grow(self, rows: int, cols: int) -> None:
+        r0, k0 = self._t.shape[0], self._off.shape[1]
+        if rows <= r0 and cols <= k0:
+            return
+        r1, k1 = _capacity(r0, rows, 16), _capacity(k0, cols, 64)
+        off, phi = np.zeros((r1, k1, 2)), np.full((r1, k1, 2), np.nan)
+        codes, t = np.full((r1, k1, 2), "", dtype="<U2"), np.full(r1, np.nan)
+        off[:r0, :k0], phi[:r0, :k0], codes[:r0, :k0], t[:r0] = self._off, self._phi, self._codes, self._t
+        self._off, self._phi, self._codes, self._t = off, phi, codes, t
+
+    def _row(self, key) -> int:
+        r = self._rows.get(key)
+        if r is None:
+            r = self._rows[key] = self._free_rows.pop() if self._free_rows else len(self._rows)
+            self._grow(r + 1, len(self._cols))
+            self._off[r], self._phi[r], self._codes[r], self._t[r] = 0.0, np.nan, "", np.nan
+        return r
+
     def remove(self, key) -> None:
         self.masters.pop(key, None)
-        self._offsets.pop(key, None)
-        self._last.pop(key, None)
+        r = self._rows.pop(key, None)
+        if r is not None:
+            self._free_rows.append(r)
 
     def apply(self, keys: list, vrs: VrsEpoch, net: NetworkEpoch) -> np.ndarray:
         """Hand over the sessions `keys` (rows of `vrs`) whose master changed; apply every session's offsets.
         Sets and returns `vrs.handed_over`."""
         T = len(keys)
         self._ints = (self._ints + [_integers(net)])[-2:]
+        sats = [str(s) for s in vrs.sats]
+        for s in sats:
+            if s not in self._cols:
+                self._cols[s] = len(self._cols)
+        rows = np.array([self._row(k) for k in keys], dtype=int)
+        self._grow(len(self._rows), len(self._cols))
+        cols = np.array([self._cols[s] for s in sats], dtype=int)
         handed = np.zeros(T, bool)
         lam = SPEED_OF_LIGHT_M_S / vrs.freq_hz
-        sats = [str(s) for s in vrs.sats]
         for i, k in enumerate(keys):
             m = vrs.master[i]
             old = self.masters.get(k)
             if old is not None and old != m:
-                handed[i] = self._hand_over(i, k, old, m, vrs, sats, lam)
+                handed[i] = self._hand_over(i, rows[i], old, m, vrs, sats, cols, lam)
                 if not handed[i]:
-                    self._offsets.pop(k, None)
+                    self._off[rows[i]] = 0.0
             self.masters[k] = m
-            off = self._offsets.get(k)
-            if off:
-                for j, s in enumerate(sats):
-                    o = off.get(s)
-                    if o is not None:
-                        vrs.phase_cyc[i, j] -= o
-        phi = lam[None] * vrs.phase_cyc - _code1(vrs.code_m)[..., None]
-        for i, k in enumerate(keys):
-            ok = np.flatnonzero(np.isfinite(phi[i]).all(axis=1))
-            self._last[k] = (vrs.t_gpst, {sats[j]: (phi[i, j], vrs.codes[j]) for j in ok})
+        if T and cols.size:
+            sel = np.ix_(rows, cols)
+            vrs.phase_cyc -= self._off[sel]
+            self._phi[rows] = np.nan
+            self._phi[sel] = lam[None] * vrs.phase_cyc - _code1(vrs.code_m)[..., None]
+            self._codes[sel] = vrs.codes[None]
+            self._t[rows] = vrs.t_gpst
         vrs.handed_over = handed
         return handed
 
-    def _hand_over(self, i: int, key, old: str, new: str, vrs: VrsEpoch, sats: list, lam: np.ndarray) -> bool:
-        last = self._last.get(key)
-        if last is None or vrs.t_gpst - last[0] > MAX_GAP_S:
+    def _hand_over(self, i: int, row: int, old: str, new: str, vrs: VrsEpoch, sats: list, cols: np.ndarray,
+                   lam: np.ndarray) -> bool:
+        if not vrs.t_gpst - self._t[row] <= MAX_GAP_S:
             return False
         ints = next((x for x in reversed(self._ints) if old in x[0] and new in x[0]), None)
         if ints is None:
@@ -91,31 +125,28 @@ class MasterHandover:
         stations, col, dd_n = ints
         n_old, n_new = dd_n[stations.index(old)], dd_n[stations.index(new)]
         phi_now = lam * vrs.phase_cyc[i] - _code1(vrs.code_m[i])[:, None]  # raw: before any offset
-        before = self._offsets.get(key) or {}  # what the last epoch's phase had subtracted
+        prev_phi, prev_codes, before = self._phi[row, cols], self._codes[row, cols], self._off[row, cols]
         cand, x, delta = [], [], []
         for j, s in enumerate(sats):
-            prev, c = last[1].get(s), col.get(s)
-            if prev is None or c is None or not np.isfinite(phi_now[j]).all() or np.any(vrs.lli[i, j] & 1):
+            c = col.get(s)
+            if c is None or not np.isfinite(phi_now[j]).all() or not np.isfinite(prev_phi[j]).all() \
+                    or np.any(vrs.lli[i, j] & 1) or np.any(prev_codes[j] != vrs.codes[j]):  # another signal
                 continue
-            if np.any(prev[1] != vrs.codes[j]):  # another signal: another phase
-                continue
-            dn = n_new[c] - n_old[c] + before.get(s, 0.0)
+            dn = n_new[c] - n_old[c] + before[j]  # with what the last epoch's phase had subtracted
             if not np.isfinite(dn).all():
                 continue
             cand.append(j)
             delta.append(dn)
-            x.append((phi_now[j] - prev[0]) / lam[j] - dn)
+            x.append((phi_now[j] - prev_phi[j]) / lam[j] - dn)
         if not cand:
             return False
         cand, x, delta = np.array(cand), np.array(x), np.array(delta)
         system = np.array([sats[j][0] for j in cand])
-        offsets = {}
+        self._off[row] = 0.0
         for sys_ in set(system.tolist()):
             w = system == sys_
             common = x[w].mean(axis=0)  # (2,) cycles: the one jump the double differences do not see
-            for j, dn in zip(cand[w], delta[w]):
-                offsets[sats[j]] = dn + common
-        self._offsets[key] = offsets
+            self._off[row, cols[cand[w]]] = delta[w] + common
         have = np.isfinite(vrs.phase_cyc[i]).any(axis=1)
         restart = have & ~np.isin(np.arange(len(sats)), cand)
         vrs.lli[i, restart] |= LLI_LOSS_OF_LOCK

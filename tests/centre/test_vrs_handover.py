@@ -190,3 +190,52 @@ def test_the_master_is_kept_within_the_margin_and_left_beyond_it():
         net.dd_n = dd if fixed else np.where(np.arange(2)[:, None, None] == 1, np.nan, dd)
         d = np.array([[d_mid + shift, d_mid - shift]])
         assert choose_masters(net, [0, 1], d, [current])[0] == want, (shift, current, fixed)
+
+
+# --- the live engine: a session moving from one station's side to the other's -------------------------------
+
+LIVE_S = 200
+MOVE_AT = 150  # the network has fixed its baselines well before
+OFFSET_M = 6_000.0  # north of check1 and then south of it: NORTH, then SOUTH nearest by 12 km (beyond the margin)
+
+
+def test_the_live_engine_hands_a_moving_session_over_without_restarting_its_locks():
+    from augnet.centre.engine import CentreEngine
+    from augnet.gnss.geometry import ecef_to_geodetic
+    from tests.centre.simdata import recorded_streams
+
+    world, streams, stations = recorded_streams(LIVE_S)
+    engine = CentreEngine(stations, world.t0, network_name="test")
+    check = world.receivers[world.receiver_ids.index("check1")].ecef[0]
+    up = check / np.linalg.norm(check)
+    north = np.cross(np.cross(up, [0.0, 0.0, 1.0]), up)  # local north (unit, horizontal)
+    north /= np.linalg.norm(north)
+
+    def at(offset):
+        lat, lon, h = ecef_to_geodetic(check + offset * north)
+        return float(np.degrees(lat)), float(np.degrees(lon)), float(h)
+
+    got = bytearray()
+    engine.open_session("train", *at(OFFSET_M), got.extend)
+    epochs = []
+    now = 0.0
+    for e in range(LIVE_S):
+        if e == MOVE_AT:
+            engine.move_session("train", *at(-OFFSET_M))
+        for name in stations:
+            engine.feed(name, streams.epoch_bytes[name][e][1], now)
+        now += 1.0
+        before = len(got)
+        for rep in engine.tick(now):
+            if rep.vrs is not None:
+                epochs.append((rep.vrs.master[0], None if rep.vrs.handed_over is None else bool(rep.vrs.handed_over[0]),
+                               _lock_ms(bytes(got[before:]))))
+            before = len(got)
+    masters = [m for m, _, _ in epochs]
+    k = masters.index("SOUTH")
+    assert set(masters[:k]) == {"NORTH"} and set(masters[k:]) == {"SOUTH"}  # one change, no flip-flop
+    assert epochs[k][1] is True
+    locks = epochs[k][2]
+    print(f"engine handover: {len(locks)} satellites, {sum(v > 0 for v in locks.values())} kept their lock; "
+          f"handover kept {engine.handover.kept}, restarted {engine.handover.restarted}")
+    assert len(locks) >= 10 and all(v > 0.0 for v in locks.values()), locks

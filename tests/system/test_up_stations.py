@@ -110,12 +110,13 @@ class Timeline:
         events = sorted([(t, f"-- {w}") for t, w in self.marks]
                         + [(t, "  ".join(f"{i} {f} km {k}" for i, f, k in row)) for t, row in self.samples])
         lines, last = [], None
-        for t, line in events:  # a line per change of state, and every mark
-            if line.startswith("--") or line != last:
+        for t, line in events:  # a line per change of the trains' fix states, and every mark
+            state = " ".join(w for w in line.split() if not w.replace(".", "").isdigit())
+            if line.startswith("--") or state != last:
                 lines.append(f"{t:7.1f} s  {line}")
             if not line.startswith("--"):
-                last = line
-        return "\n".join(lines)
+                last = state
+        return "\n".join(lines) + f"\n({len(self.samples)} samples, the last at {self.samples[-1][0]:.1f} s)"
 
 
 def test_a_deleted_station_leaves_and_a_re_added_one_joins_the_running_network(up):
