@@ -5,8 +5,9 @@ For every point, per satellite (network-rtk.md, step 5):
     P_vrs = P_m + (g_v - g_m) + (T_v - T_m) + dT + mu_k dI
     L_vrs = L_m + [(g_v - g_m) + (T_v - T_m) + dT - mu_k dI] / lambda_k
 
-where m is the point's master station (the nearest station with data), g = rho - c dts the geometric term
-computed at each position with its own transit time and Sagnac rotation (so satellite clock and Earth
+where m is the point's master station (the nearest station with data, kept with a hysteresis while the
+network lacks the integers to hand the VRS over to another: `choose_masters`, vrs_handover.py), g = rho - c dts
+the geometric term computed at each position with its own transit time and Sagnac rotation (so satellite clock and Earth
 rotation stay consistent), T the troposphere model at each position and height, dT and dI the interpolated
 non-dispersive and dispersive (f1 ionosphere) corrections between point and master, and
 mu_k = (f1 / f_k)^2. The VRS inherits the master's receiver clock and ambiguities, so a rover's double
@@ -56,7 +57,8 @@ TRANSIT_CARRY_ITERATIONS = 3  # each shrinks the transit-time error by v_sat/c ~
 # standing at a midpoint (metres), small beside the ~70 km station spacing (decision 0223).
 MASTER_SWITCH_MARGIN_M = 2_000.0
 # ... and unless the network has the DD integers between the two masters for this many satellites (the
-# handover keeps those locks, vrs_handover.py): a rover fixes on five DD, one per system besides (decision 0223)
+# handover keeps those locks, vrs_handover.py): a network epoch's five DD (postprocess.MIN_NETWORK_DD) and a
+# reference satellite in each of three systems (decision 0223)
 HANDOVER_MIN_SATELLITES = 8
 # Beyond this a point leaves its master for the nearest even without the integers: a backstop (half the
 # station spacing of the demo and network-70km), the corrections are interpolated at the point either way.
@@ -324,16 +326,20 @@ def choose_masters(net: NetworkEpoch, present: list[int], d: np.ndarray, current
     between the two for HANDOVER_MIN_SATELLITES satellites (or nearer by MASTER_FORCE_MARGIN_M)."""
     nearest = np.argmin(d, axis=1) if d.size else np.zeros(len(d), int)
     pos = {net.stations[r]: k for k, r in enumerate(present)}
-    for i, name in enumerate(current):
-        k = pos.get(name) if name is not None else None
-        if k is None or k == nearest[i]:
-            continue
-        gain = d[i, k] - d[i, nearest[i]]
-        if gain < MASTER_SWITCH_MARGIN_M:
-            nearest[i] = k
-        elif gain < MASTER_FORCE_MARGIN_M and \
-                handover_satellites(net, name, net.stations[present[nearest[i]]]) < HANDOVER_MIN_SATELLITES:
-            nearest[i] = k
+    cur = np.array([pos.get(name, -1) if name is not None else -1 for name in current], dtype=int)
+    idx = np.flatnonzero((cur >= 0) & (cur != nearest))
+    if not idx.size:
+        return nearest
+    gain = d[idx, cur[idx]] - d[idx, nearest[idx]]
+    keep = gain < MASTER_SWITCH_MARGIN_M
+    ready: dict = {}
+    for n in np.flatnonzero(~keep & (gain < MASTER_FORCE_MARGIN_M)):  # may move: only with the integers
+        pair = (int(cur[idx[n]]), int(nearest[idx[n]]))
+        if pair not in ready:
+            ready[pair] = handover_satellites(net, net.stations[present[pair[0]]],
+                                              net.stations[present[pair[1]]]) >= HANDOVER_MIN_SATELLITES
+        keep[n] = not ready[pair]
+    nearest[idx[keep]] = cur[idx[keep]]
     return nearest
 
 

@@ -29,8 +29,8 @@ from augnet.centre.network import NetworkEpoch
 from augnet.centre.vrs import VrsEpoch
 from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
 
-# The previous VRS epoch of the point must be this recent: phase minus code drifts with the ionosphere (mm/s)
-# and the last epoch's value stands for the change's; a longer gap is a restart anyway for most rovers.
+# The previous VRS epoch (the point must be in it) must be this recent: phase minus code drifts with the
+# ionosphere (mm/s) and the last epoch's value stands for the change's; a longer gap restarts most rovers anyway.
 MAX_GAP_S = 5.0
 LLI_LOSS_OF_LOCK = 1  # RINEX LLI bit 0: what the stream encoder restarts a lock on
 
@@ -41,40 +41,39 @@ def _capacity(have: int, need: int, least: int) -> int:
 
 
 class MasterHandover:
-    """Per session (key): its master, its phase offsets since its last restart, and last epoch's phase minus
-    code; `apply` hands each changed session over, in place on the VRS epoch. Sessions x satellites as dense
-    arrays (a row per session, a column per satellite ever seen), so that thousands of sessions cost a few
-    array operations per epoch; only a handover walks its satellites."""
+    """Per session (key): its master and its phase offsets since its last restart (dense, a row per session and a
+    column per satellite ever seen); and the last epoch's phase minus code of every session. `apply` hands each
+    changed session over, in place on the VRS epoch: a few array operations per epoch for thousands of
+    sessions, only a handover walks its satellites."""
 
     def __init__(self):
         self.masters: dict = {}  # key -> master station of the last epoch
-        self._rows: dict = {}  # key -> row
+        self._rows: dict = {}  # key -> row of the offsets
         self._free_rows: list[int] = []
-        self._cols: dict[str, int] = {}  # satellite -> column
-        self._off = np.zeros((0, 0, 2))  # cycles subtracted from the VRS phase (0: none)
-        self._phi = np.full((0, 0, 2), np.nan)  # last epoch's phase minus code [m] (NaN: not sent)
-        self._codes = np.full((0, 0, 2), "", dtype="<U2")  # ... and its signals
-        self._t = np.full(0, np.nan)  # ... and its time
+        self._cols: dict[str, int] = {}  # satellite -> column of the offsets
+        self._off = np.zeros((0, 0, 2))  # cycles subtracted from the VRS phase
+        self._has_off = np.zeros(0, bool)  # rows with any offset
+        # the last epoch: (t, key -> row, satellite -> column, (T, S, 2) phase minus code [m], (S, 2) signals)
+        self._last: tuple | None = None
         self._ints: list = []  # the last two network epochs' (stations, sats, dd_n)
         self.kept = 0  # satellites handed over (for the log and the tests)
         self.restarted = 0  # satellites restarted at a handover
 
     def _grow(self, rows: int, cols: int) -> None:
-        r0, k0 = self._t.shape[0], self._off.shape[1]
+        r0, k0 = self._off.shape[:2]
         if rows <= r0 and cols <= k0:
             return
         r1, k1 = _capacity(r0, rows, 16), _capacity(k0, cols, 64)
-        off, phi = np.zeros((r1, k1, 2)), np.full((r1, k1, 2), np.nan)
-        codes, t = np.full((r1, k1, 2), "", dtype="<U2"), np.full(r1, np.nan)
-        off[:r0, :k0], phi[:r0, :k0], codes[:r0, :k0], t[:r0] = self._off, self._phi, self._codes, self._t
-        self._off, self._phi, self._codes, self._t = off, phi, codes, t
+        off, has = np.zeros((r1, k1, 2)), np.zeros(r1, bool)
+        off[:r0, :k0], has[:r0] = self._off, self._has_off
+        self._off, self._has_off = off, has
 
     def _row(self, key) -> int:
         r = self._rows.get(key)
         if r is None:
             r = self._rows[key] = self._free_rows.pop() if self._free_rows else len(self._rows)
             self._grow(r + 1, len(self._cols))
-            self._off[r], self._phi[r], self._codes[r], self._t[r] = 0.0, np.nan, "", np.nan
+            self._off[r], self._has_off[r] = 0.0, False
         return r
 
     def remove(self, key) -> None:
@@ -97,27 +96,28 @@ class MasterHandover:
         cols = np.array([self._cols[s] for s in sats], dtype=int)
         handed = np.zeros(T, bool)
         lam = SPEED_OF_LIGHT_M_S / vrs.freq_hz
+        masters = self.masters
         for i, k in enumerate(keys):
             m = vrs.master[i]
-            old = self.masters.get(k)
-            if old is not None and old != m:
-                handed[i] = self._hand_over(i, rows[i], old, m, vrs, sats, cols, lam)
-                if not handed[i]:
-                    self._off[rows[i]] = 0.0
-            self.masters[k] = m
-        if T and cols.size:
-            sel = np.ix_(rows, cols)
-            vrs.phase_cyc -= self._off[sel]
-            self._phi[rows] = np.nan
-            self._phi[sel] = lam[None] * vrs.phase_cyc - _code1(vrs.code_m)[..., None]
-            self._codes[sel] = vrs.codes[None]
-            self._t[rows] = vrs.t_gpst
+            old = masters.get(k)
+            if old != m:
+                if old is not None:
+                    handed[i] = self._hand_over(i, k, rows[i], old, m, vrs, sats, cols, lam)
+                    if not handed[i]:
+                        self._off[rows[i]], self._has_off[rows[i]] = 0.0, False
+                masters[k] = m
+        has = self._has_off[rows]
+        if has.any() and cols.size:
+            vrs.phase_cyc[has] -= self._off[np.ix_(rows[has], cols)]
+        phi = lam[None] * vrs.phase_cyc - _code1(vrs.code_m)[..., None]
+        self._last = (vrs.t_gpst, dict(zip(keys, range(T))), dict(zip(sats, range(len(sats)))), phi, vrs.codes)
         vrs.handed_over = handed
         return handed
 
-    def _hand_over(self, i: int, row: int, old: str, new: str, vrs: VrsEpoch, sats: list, cols: np.ndarray,
+    def _hand_over(self, i: int, key, row: int, old: str, new: str, vrs: VrsEpoch, sats: list, cols: np.ndarray,
                    lam: np.ndarray) -> bool:
-        if not vrs.t_gpst - self._t[row] <= MAX_GAP_S:
+        last = self._last
+        if last is None or not vrs.t_gpst - last[0] <= MAX_GAP_S or key not in last[1]:
             return False
         ints = next((x for x in reversed(self._ints) if old in x[0] and new in x[0]), None)
         if ints is None:
@@ -125,19 +125,20 @@ class MasterHandover:
         stations, col, dd_n = ints
         n_old, n_new = dd_n[stations.index(old)], dd_n[stations.index(new)]
         phi_now = lam * vrs.phase_cyc[i] - _code1(vrs.code_m[i])[:, None]  # raw: before any offset
-        prev_phi, prev_codes, before = self._phi[row, cols], self._codes[row, cols], self._off[row, cols]
+        prev_phi, last_col, prev_codes = last[3][last[1][key]], last[2], last[4]
+        before = self._off[row, cols]  # what the last epoch's phase had subtracted
         cand, x, delta = [], [], []
         for j, s in enumerate(sats):
-            c = col.get(s)
-            if c is None or not np.isfinite(phi_now[j]).all() or not np.isfinite(prev_phi[j]).all() \
-                    or np.any(vrs.lli[i, j] & 1) or np.any(prev_codes[j] != vrs.codes[j]):  # another signal
+            c, p = col.get(s), last_col.get(s)
+            if c is None or p is None or not np.isfinite(phi_now[j]).all() or not np.isfinite(prev_phi[p]).all() \
+                    or np.any(vrs.lli[i, j] & 1) or np.any(prev_codes[p] != vrs.codes[j]):  # another signal
                 continue
-            dn = n_new[c] - n_old[c] + before[j]  # with what the last epoch's phase had subtracted
+            dn = n_new[c] - n_old[c] + before[j]
             if not np.isfinite(dn).all():
                 continue
             cand.append(j)
             delta.append(dn)
-            x.append((phi_now[j] - prev_phi[j]) / lam[j] - dn)
+            x.append((phi_now[j] - prev_phi[p]) / lam[j] - dn)
         if not cand:
             return False
         cand, x, delta = np.array(cand), np.array(x), np.array(delta)
@@ -147,6 +148,7 @@ class MasterHandover:
             w = system == sys_
             common = x[w].mean(axis=0)  # (2,) cycles: the one jump the double differences do not see
             self._off[row, cols[cand[w]]] = delta[w] + common
+        self._has_off[row] = True
         have = np.isfinite(vrs.phase_cyc[i]).any(axis=1)
         restart = have & ~np.isin(np.arange(len(sats)), cand)
         vrs.lli[i, restart] |= LLI_LOSS_OF_LOCK
