@@ -43,6 +43,7 @@ from augnet.centre.network import MEMBERSHIP_KIND, MembershipChange, NetworkEpoc
 from augnet.centre.service_area import AreaAlarm, AreaAnswer, AreaConfig, ServiceArea, refusal_message
 from augnet.centre.vrs import VrsEpoch, VrsPlan, synthesize
 from augnet.centre.vrs_admission import AdmissionBatch, AdmissionConfig, fixed_somewhere
+from augnet.centre.vrs_handover import MasterHandover
 from augnet.centre.vrs_stream import VrsStreamEncoder
 from augnet.gnss.antex import AntexFile, read_antex
 from augnet.gnss.geometry import ecef_to_enu, ecef_to_geodetic, enu_rotation
@@ -131,6 +132,7 @@ class CentreEngine:
         # (coordinate_monitor.py, decision 0254)
         self.coordinates = StationCoordinateMonitor()
         self.admission = AdmissionBatch(admission)  # per session: when newly corrected satellites enter its VRS
+        self.handover = MasterHandover()  # per session: its phase kept continuous across master changes (0223)
         self.sessions: dict[str, Session] = {}
         self._station_ids = itertools.count(FIRST_VRS_STATION_ID)
         self.outbox: list[tuple[str, bytes]] = []  # (bus subject, payload) for the service to publish
@@ -334,6 +336,7 @@ class CentreEngine:
         self.sessions.pop(client_id, None)
         self.encoder.remove(client_id)
         self.admission.remove(client_id)
+        self.handover.remove(client_id)
 
     # --- processing -----------------------------------------------------------------------------
 
@@ -399,8 +402,10 @@ class CentreEngine:
             t0, c0 = time.perf_counter(), time.process_time()
             points = np.array([self.sessions[c].point_ecef for c in ids])
             vrs = synthesize(ne, {k: v for k, v in eps.items() if v is not None}, points, self.nav,
-                             plan=self._plan, keys=ids)
+                             plan=self._plan, keys=ids, masters=self.handover.masters)
             self._plan = None
+            if vrs is not None:
+                self.handover.apply(ids, vrs, ne)
             if vrs is not None and self.admission.config.admission:
                 self._admit(ids, ne, vrs)
             t1 = time.perf_counter()
@@ -482,7 +487,7 @@ class CentreEngine:
         it does not carry (yet) are left out, and at its moments every satellite it carries is flagged
         loss-of-lock."""
         corrected = vrs.corrected & np.isin(vrs.sats.astype(str), list(fixed_somewhere(ne)))[None, :]
-        carried, moment = self.admission.step(vrs.t_gpst, ids, vrs.sats, corrected, vrs.master)
+        carried, moment = self.admission.step(vrs.t_gpst, ids, vrs.sats, corrected, vrs.master, vrs.handed_over)
         # not a network VRS (too few corrected): the session gets its fallback as synthesised, as `augnet vrs`
         # writes its single-base epoch then
         out = vrs.corrected & ~carried & carried.any(axis=1)[:, None]
@@ -508,7 +513,7 @@ class CentreEngine:
             self._plan = None
             return
         eps = {k: v for k, v in self._last_eps.items() if v is not None}
-        plan = VrsPlan(ne, self.nav, ne.t_gpst + self._interval_s, list(eps))
+        plan = VrsPlan(ne, self.nav, ne.t_gpst + self._interval_s, list(eps), masters=self.handover.masters)
         ids = list(self.sessions)
         plan.rows_for(np.array([self.sessions[c].point_ecef for c in ids]), ids)
         plan.add_sats(sorted({str(s) for e in eps.values() for s in e.sats} - set(ne.excluded)))

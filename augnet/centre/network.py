@@ -132,6 +132,10 @@ class NetworkEpoch:
     vrs_excluded: set[str] = field(default_factory=set)
     # per modelled station: (sats (S,), (S, 2) phase-centre correction e . PCO - PCV [m]) of this epoch
     antenna_m: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    # (n, S, 2) DD integers [cycles] of station minus master, satellite minus the system's reference in `refs`,
+    # chained like the residuals (NaN where not fixed along the path): a VRS changing its master keeps its
+    # phase continuous with them (vrs_handover.py); None when not computed
+    dd_n: np.ndarray | None = None
 
     def antenna_correction(self, ep: StationEpoch) -> np.ndarray | None:
         """(S, 2) phase-centre correction of a station epoch's satellites (NaN for any this epoch did not see:
@@ -346,7 +350,7 @@ class NetworkSolver:
         self._share_ionosphere(results)
         refs = self._network_refs(results)
         sats = np.array(sorted({str(s) for r in results.values() if r is not None for s in r.sats}))
-        iono, trop = self._chain_to_master(results, refs, sats)
+        iono, trop, dd_n = self._chain_to_master(results, refs, sats)
         rows = self.order
         return NetworkEpoch(
             t_gpst=t, master=self.master, stations=[self.names[i] for i in rows], station_en_m=self.en[rows],
@@ -354,7 +358,8 @@ class NetworkSolver:
             baselines={self.solvers[e].name: r for e, r in results.items()}, misclosures=misclosures,
             present=sorted(present), clocks=dict(self.clocks), excluded=set(excluded),
             alarms=self.integrity.drain(),
-            antenna_m={n: (g.sats, g.antenna_m) for n, g in geom.items() if g.antenna_m is not None})
+            antenna_m={n: (g.sats, g.antenna_m) for n, g in geom.items() if g.antenna_m is not None},
+            dd_n=dd_n[rows])
 
     def _geometry(self, epochs, present, nav) -> dict[str, SatelliteGeometry]:
         """Each present station's satellite geometry, computed once for all its baselines; the receiver clocks are
@@ -389,37 +394,41 @@ class NetworkSolver:
         self.iono_model = ionosphere_model(results, self.ionosphere_hints.length, self.cfg)
         self._model_hints = model_predictions(self.iono_model, results, self.ionosphere_hints.length)
 
-    def _chain_to_master(self, results, refs, sats) -> tuple[np.ndarray, np.ndarray]:
+    def _chain_to_master(self, results, refs, sats) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(n, S) DD ionosphere and non-dispersive residuals of every station (in `self.names` order) against the
         master, chained over baselines: per satellite, along the shortest path (in metres) on which that satellite
         is fixed on every baseline. Edges are relaxed in order of length, so a short path wins over a long one; a
-        satellite missing on one baseline reaches the station over another."""
+        satellite missing on one baseline reaches the station over another. Third: the (n, S, 2) DD integers
+        chained along the same paths."""
         n = len(self.names)
         iono = np.full((n, len(sats)), np.nan)
         trop = np.full((n, len(sats)), np.nan)
+        ints = np.full((n, len(sats), 2), np.nan)
         col = {s: k for k, s in enumerate(sats)}
         per_edge = {e: self._rereferenced(r, refs, col, len(sats)) for e, r in results.items()}
         m = self.order[0]
         iono[m] = 0.0
         trop[m] = 0.0
+        ints[m] = 0.0
         edges = sorted((self.solvers[e].length_m, e) for e, v in per_edge.items() if v is not None)
         dist = np.full((n, len(sats)), np.inf)
         dist[m] = 0.0
         for _ in range(n):
             changed = False
             for length, (a, b) in edges:
-                vi, vt = per_edge[(a, b)]
+                vi, vt, vn = per_edge[(a, b)]
                 ok = np.isfinite(vi) & np.isfinite(vt)
                 for src, dst, sign in ((a, b, 1.0), (b, a, -1.0)):  # residuals are b minus a
                     better = ok & np.isfinite(dist[src]) & (dist[src] + length < dist[dst])
                     if better.any():
                         iono[dst, better] = iono[src, better] + sign * vi[better]
                         trop[dst, better] = trop[src, better] + sign * vt[better]
+                        ints[dst, better] = ints[src, better] + sign * vn[better]
                         dist[dst, better] = dist[src, better] + length
                         changed = True
             if not changed:
                 break
-        return iono, trop
+        return iono, trop, ints
 
     def _network_refs(self, results) -> dict[str, str]:
         """Per system, the satellite fixed on the most baselines (ties: the first baseline's reference)."""
@@ -435,11 +444,12 @@ class NetworkSolver:
 
     @staticmethod
     def _rereferenced(r: BaselineEpoch | None, refs: dict[str, str], col: dict[str, int], n: int):
-        """A baseline's DD residuals against the network's references, as (iono, trop) rows."""
+        """A baseline's DD residuals against the network's references, as (iono, trop, (n, 2) integers) rows."""
         if r is None:
             return None
         iono = np.full(n, np.nan)
         trop = np.full(n, np.nan)
+        ints = np.full((n, 2), np.nan)
         pos = {str(s): k for k, s in enumerate(r.sats)}
         for system, ref in refs.items():
             kr = pos.get(ref)
@@ -450,7 +460,8 @@ class NetworkSolver:
                     continue
                 iono[col[str(s)]] = r.dd_iono_m[k] - r.dd_iono_m[kr]
                 trop[col[str(s)]] = r.dd_trop_m[k] - r.dd_trop_m[kr]
-        return iono, trop
+                ints[col[str(s)]] = r.dd_n[k] - r.dd_n[kr]
+        return iono, trop, ints
 
     def _check_closures(self, results) -> int:
         """Integer closure around each triangle; on a misclosure, the satellite's residuals are voided on the

@@ -5,8 +5,9 @@ For every point, per satellite (network-rtk.md, step 5):
     P_vrs = P_m + (g_v - g_m) + (T_v - T_m) + dT + mu_k dI
     L_vrs = L_m + [(g_v - g_m) + (T_v - T_m) + dT - mu_k dI] / lambda_k
 
-where m is the point's master station (the nearest station with data), g = rho - c dts the geometric term
-computed at each position with its own transit time and Sagnac rotation (so satellite clock and Earth
+where m is the point's master station (the nearest station with data, kept with a hysteresis while the
+network lacks the integers to hand the VRS over to another: `choose_masters`, vrs_handover.py), g = rho - c dts
+the geometric term computed at each position with its own transit time and Sagnac rotation (so satellite clock and Earth
 rotation stay consistent), T the troposphere model at each position and height, dT and dI the interpolated
 non-dispersive and dispersive (f1 ionosphere) corrections between point and master, and
 mu_k = (f1 / f_k)^2. The VRS inherits the master's receiver clock and ambiguities, so a rover's double
@@ -52,6 +53,16 @@ UNCORRECTED_MAX_DISTANCE_M = 5_000.0
 # unknown; the next stations along the line give it (docs/decisions/0001-vrs-subnet-six-stations.md).
 SUBNET_STATIONS = 6
 TRANSIT_CARRY_ITERATIONS = 3  # each shrinks the transit-time error by v_sat/c ~ 1e-5
+# A point keeps its master unless another station is nearer by this much: far above the GGA noise of a train
+# standing at a midpoint (metres), small beside the ~70 km station spacing (decision 0223).
+MASTER_SWITCH_MARGIN_M = 2_000.0
+# ... and unless the network has the DD integers between the two masters for this many satellites (the
+# handover keeps those locks, vrs_handover.py): a network epoch's five DD (postprocess.MIN_NETWORK_DD) and a
+# reference satellite in each of three systems (decision 0223)
+HANDOVER_MIN_SATELLITES = 8
+# Beyond this a point leaves its master for the nearest even without the integers: a backstop (half the
+# station spacing of the demo and network-70km), the corrections are interpolated at the point either way.
+MASTER_FORCE_MARGIN_M = 35_000.0
 
 
 @dataclass
@@ -72,12 +83,16 @@ class VrsEpoch:
     model: np.ndarray  # (T, S) int8: interpolation model (interpolation.MODEL_CODES; -1 none)
     distance_to_master_m: np.ndarray  # (T,)
     flags: dict = field(default_factory=dict)
+    # (T,) bool: the point changed its master and the phase was handed over (vrs_handover.py: the satellites
+    # not flagged loss-of-lock keep their lock); None: no handover, a master change restarts every lock
+    handed_over: np.ndarray | None = None
 
     def rows(self, sl: slice) -> "VrsEpoch":
         """The points in `sl` (views, not copies)."""
         return VrsEpoch(self.t_gpst, self.points_ecef_m[sl], self.master[sl], self.sats, self.codes, self.freq_hz,
                         self.code_m[sl], self.phase_cyc[sl], self.cnr_dbhz[sl], self.lli[sl], self.corrected[sl],
-                        self.model[sl], self.distance_to_master_m[sl], self.flags)
+                        self.model[sl], self.distance_to_master_m[sl], self.flags,
+                        None if self.handed_over is None else self.handed_over[sl])
 
     def station_epoch(self, i: int, name: str = "VRS") -> StationEpoch:
         """Point i as an ordinary station epoch (for RINEX output or a rover engine)."""
@@ -177,8 +192,10 @@ class VrsPlan:
     reference, so a plan made ahead gives the very numbers a plan made on the spot would."""
 
     def __init__(self, net: NetworkEpoch, nav: NavigationData, t_tag: float, present: list[str],
-                 clocks: dict[str, float] | None = None):
+                 clocks: dict[str, float] | None = None, masters: dict | None = None):
+        """`masters`: the current master of each point key, kept by `choose_masters`'s hysteresis."""
         self.net = net
+        self.current_masters = masters or {}
         self.nav = nav
         self.t_tag = float(t_tag)
         self.clocks = net.clocks if clocks is None else clocks
@@ -232,7 +249,7 @@ class VrsPlan:
         xyz = net.station_xyz_m
         if self.present:
             d = np.linalg.norm(pts[:, None, :] - xyz[None, self.present, :], axis=2)
-            nearest = np.argmin(d, axis=1)
+            nearest = choose_masters(net, self.present, d, [self.current_masters.get(k) for k in keys])
             master_idx = np.array(self.present)[nearest]  # (T,) row in net.stations
             dist = d[np.arange(T), nearest]
         else:
@@ -305,15 +322,48 @@ class VrsPlan:
         return tuple(a[0, cols] for a in geo)
 
 
+def choose_masters(net: NetworkEpoch, present: list[int], d: np.ndarray, current: list) -> np.ndarray:
+    """Each point's master, as an index into `present` (rows of net.stations with data; `d`: points x present
+    distances [m]): the nearest, but a point keeps its `current` master (a station name, None for a new point)
+    while it has data, unless another is nearer by MASTER_SWITCH_MARGIN_M and the network has the DD integers
+    between the two for HANDOVER_MIN_SATELLITES satellites (or nearer by MASTER_FORCE_MARGIN_M)."""
+    nearest = np.argmin(d, axis=1) if d.size else np.zeros(len(d), int)
+    pos = {net.stations[r]: k for k, r in enumerate(present)}
+    cur = np.array([pos.get(name, -1) if name is not None else -1 for name in current], dtype=int)
+    idx = np.flatnonzero((cur >= 0) & (cur != nearest))
+    if not idx.size:
+        return nearest
+    gain = d[idx, cur[idx]] - d[idx, nearest[idx]]
+    keep = gain < MASTER_SWITCH_MARGIN_M
+    ready: dict = {}
+    for n in np.flatnonzero(~keep & (gain < MASTER_FORCE_MARGIN_M)):  # may move: only with the integers
+        pair = (int(cur[idx[n]]), int(nearest[idx[n]]))
+        if pair not in ready:
+            ready[pair] = handover_satellites(net, net.stations[present[pair[0]]],
+                                              net.stations[present[pair[1]]]) >= HANDOVER_MIN_SATELLITES
+        keep[n] = not ready[pair]
+    nearest[idx[keep]] = cur[idx[keep]]
+    return nearest
+
+
+def handover_satellites(net: NetworkEpoch, a: str, b: str) -> int:
+    """How many satellites have the DD integers between stations `a` and `b` on both frequencies."""
+    if net.dd_n is None or a not in net.stations or b not in net.stations:
+        return 0
+    ia, ib = net.stations.index(a), net.stations.index(b)
+    return int(np.isfinite(net.dd_n[ia] - net.dd_n[ib]).all(axis=1).sum())
+
+
 def synthesize(net: NetworkEpoch, station_epochs: dict[str, StationEpoch], points_ecef_m,
                nav: NavigationData, clocks: dict[str, float] | None = None, plan: VrsPlan | None = None,
-               keys: list | None = None) -> VrsEpoch | None:
+               keys: list | None = None, masters: dict | None = None) -> VrsEpoch | None:
     """VRS observations for each point, from the network's residuals and the master stations' data.
 
     Receiver clocks of the masters default to the network's estimates; satellites the integrity monitor
     excluded are left out of every VRS. `plan` (made ahead for this network epoch, epoch tag and stations,
     see `VrsPlan`; ignored when it does not fit) and `keys` (one per point: the client, so that a plan's row
-    is reused while its point is unchanged) only save time: the result is the same."""
+    is reused while its point is unchanged) only save time: the result is the same. `masters`: the current master
+    of each key (hysteresis, `choose_masters`; a plan made ahead takes them when made)."""
     pts = np.atleast_2d(np.asarray(points_ecef_m, float))
     T = len(pts)
     present_names = [s for s in net.stations if station_epochs.get(s) is not None and s not in net.vrs_excluded]
@@ -322,8 +372,8 @@ def synthesize(net: NetworkEpoch, station_epochs: dict[str, StationEpoch], point
     t_tag = float(station_epochs[present_names[0]].t_gpst)
     planned = plan is not None and plan.fits(net, nav, t_tag, present_names, clocks)
     if not planned:
-        plan = VrsPlan(net, nav, t_tag, present_names, clocks)
-        keys = None
+        plan = VrsPlan(net, nav, t_tag, present_names, clocks, masters)
+        keys = None if not masters else keys
     rows = plan.rows_for(pts, keys)
     master_idx = plan.master_idx[rows]
     dist = plan.dist[rows]

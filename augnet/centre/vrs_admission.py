@@ -14,7 +14,8 @@ An admission moment is held when satellites wait and
   * the VRS is not a network VRS yet (single-base, or the start) but would be with them: as soon as the set is
     ready (below), without waiting for the interval;
   * it was a network VRS and without them no longer would be (the network lost satellites): at once;
-  * the VRS changes its master station (every satellite restarts anyway): at once;
+  * the VRS changes its master station (every satellite restarts anyway): at once; not when the VRS was handed
+    over to the new master (vrs_handover.py, decision 0223: its satellites keep their locks);
   * otherwise at least `interval_s` after the last moment, once ready;
 where ready is: the corrected set has not changed for `settle_s` (the network has fixed what it was about to
 fix), or `min_satellites` wait (entering: are corrected), or a satellite has waited `max_wait_s`.
@@ -237,14 +238,17 @@ class AdmissionBatch:
         enough = ((counts - 1) * systems).sum(axis=1) >= self._min_dd
         return corrected & systems[:, self._col_system[:corrected.shape[1]]] & enough[:, None]
 
-    def step(self, t: float, keys: list, sats, corrected: np.ndarray, masters: list | None = None):
+    def step(self, t: float, keys: list, sats, corrected: np.ndarray, masters: list | None = None,
+             handed_over: np.ndarray | None = None):
         """One epoch at `t` [s] for the sessions `keys`: `corrected` (sessions x `sats`) their network-corrected
-        satellites; `masters` (one per session) their master stations (a change is a moment for the waiting).
+        satellites; `masters` (one per session) their master stations (a change is a moment for the waiting,
+        unless the session's VRS was handed over to the new master, `handed_over`: its locks continue).
         Returns (carried (sessions x sats) bool, moment (sessions,) bool)."""
         cfg = self.config
         sat_cols = np.array([self._col(str(s)) for s in sats], dtype=int)
         if masters is not None:
-            changed_master = [k for k, m in zip(keys, masters) if self._masters.get(k, m) != m]
+            kept = [False] * len(keys) if handed_over is None else [bool(h) for h in handed_over]
+            changed_master = [k for k, m, h in zip(keys, masters, kept) if self._masters.get(k, m) != m and not h]
             if changed_master:
                 self.restart(changed_master)
             self._masters.update(zip(keys, masters))

@@ -207,7 +207,7 @@ class VrsStreamEncoder:
         self._eph_sent[np.ix_(rows_c, gsat)] = np.where(due, eph_rows[None, :], sent)
         for i, cid in enumerate(ids):
             c = self.clients[cid]
-            if c.master and c.master != vrs.master[i]:
+            if c.master and c.master != vrs.master[i] and not (vrs.handed_over is not None and vrs.handed_over[i]):
                 self._lock_t0[c.row] = np.nan  # new master, new ambiguities: every lock restarts
             c.master = vrs.master[i]
             if c.moved or t - c.last_arp >= STATION_INTERVAL_S:

@@ -475,9 +475,9 @@ NETWORK_EPOCH = _Record(NetworkEpoch, (
     ("refs", _Dict(STR, STR)), ("sats", ARRAY), ("dd_iono_m", ARRAY), ("dd_trop_m", ARRAY),
     ("baselines", _Dict(STR, _Optional(BASELINE_EPOCH))), ("misclosures", I64), ("present", STRS),
     ("clocks", _Dict(STR, F64)), ("excluded", _List(STR, set)), ("alarms", _List(ALARM))),
-    # the stations' antenna corrections and the stations left out of VRS synthesis serve the centre's own synthesis
-    # (the service hears of an exclusion by its station-coordinates alarm, in the outbox)
-    left_behind={"antenna_m": {}, "vrs_excluded": set()})
+    # the stations' antenna corrections, the chained DD integers and the stations left out of VRS synthesis serve
+    # the centre's own synthesis (the service hears of an exclusion by its station-coordinates alarm, in the outbox)
+    left_behind={"antenna_m": {}, "dd_n": None, "vrs_excluded": set()})
 # `vrs` (every session's synthesised observations) stays in the centre; `vrs_models` is what the console
 # shows of it
 EPOCH_REPORT = _Record(EpochReport, (

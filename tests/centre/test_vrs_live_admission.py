@@ -98,8 +98,8 @@ def _live(sim, admission: AdmissionConfig, vrs_before_network: bool = True) -> d
     decisions = []
     step = engine.admission.step
 
-    def recording_step(t, keys, sats, corrected, masters=None):
-        carried, moment = step(t, keys, sats, corrected, masters)
+    def recording_step(t, keys, sats, corrected, masters=None, handed_over=None):
+        carried, moment = step(t, keys, sats, corrected, masters, handed_over)
         sats = np.asarray(sats)
         decisions.append((t, frozenset(map(str, sats[carried[0]])), bool(moment[0]),
                           frozenset(map(str, sats[np.asarray(corrected)[0]]))))
