@@ -16,12 +16,10 @@ from augnet.centre.vrs import MASTER_SWITCH_MARGIN_M, choose_masters, synthesize
 from augnet.centre.vrs_handover import MasterHandover
 from augnet.centre.vrs_stream import VrsStreamEncoder
 from augnet.gnss.constants import SPEED_OF_LIGHT_M_S
-from augnet.gnss.rtcm.codec import MessageReader
-from augnet.gnss.rtcm.msm import MsmMessage
-from augnet.gnss.rtcm.observables import msm_to_observables
 from stations.scenario import load_scenario
 from stations.world import World
 from tests.centre.simdata import station_epochs
+from tests.centre.test_vrs_live_admission import _epoch_msm  # satellite -> least MSM lock time [ms]
 
 pytestmark = pytest.mark.slow
 
@@ -35,16 +33,6 @@ SCHEDULE = [(0, "NORTH"), (130, "SOUTH"), (165, "EAST")]
 CONTINUITY_RMS_M = 0.02
 CONTINUITY_M = 0.04
 WINDOW = 10
-
-
-def _lock_ms(data: bytes) -> dict[str, float]:
-    out = {}
-    for msg in MessageReader().feed(data):
-        if isinstance(msg, MsmMessage):
-            obs = msm_to_observables(msg)
-            for k, prn in enumerate(obs.sat_ids):
-                out[f"{obs.system}{int(prn):02d}"] = float(np.nanmin(obs.lock_ms[k]))
-    return out
 
 
 def _run(handover: bool, unfix: bool = False):
@@ -81,7 +69,7 @@ def _run(handover: bool, unfix: bool = False):
             data = enc.encode(["train"], vrs, world.nav)["train"]
             rover = per["check1"][e]
             out.append((epoch, vrs.master[0], _dd(rover, vrs), vrs.lli[0].copy(), list(map(str, vrs.sats)),
-                        _lock_ms(data)))
+                        _epoch_msm(data)))
             epoch += 1
     return out, dropped, ho
 
@@ -229,7 +217,7 @@ def test_the_live_engine_hands_a_moving_session_over_without_restarting_its_lock
         for rep in engine.tick(now):
             if rep.vrs is not None:
                 epochs.append((rep.vrs.master[0], None if rep.vrs.handed_over is None else bool(rep.vrs.handed_over[0]),
-                               _lock_ms(bytes(got[before:]))))
+                               _epoch_msm(bytes(got[before:]))))
             before = len(got)
     masters = [m for m, _, _ in epochs]
     k = masters.index("SOUTH")
