@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import shutil
 import subprocess
 import sys
 import time
@@ -25,6 +24,7 @@ from augnet.centre.observations import StationEpoch
 from augnet.centre.vrs import synthesize
 from augnet.centre.vrs_stream import VrsStreamEncoder
 from augnet.gnss.geometry import geodetic_deg_to_ecef
+from augnet.bench.yardstick import yardstick_ms  # shared by every bench (issue 17)
 
 GOAL_MS_2000_TRAINS = 100.0
 GOAL_MS_60_STATIONS = 100.0  # issue 17: a region of 60 stations within 100 ms per epoch
@@ -76,17 +76,6 @@ def network_ms_per_epoch(n_stations: int, epochs: int, solver=NetworkSolver) -> 
         net.update(eps, world.nav)
         times.append(time.process_time() - t0)
     return 1e3 * float(np.median(times[len(times) // 3:])), len(net.edges)
-
-
-def yardstick_ms() -> float | None:
-    """RTKLIB rnx2rtkp's CPU time per epoch [ms] on static-1m-2024, GPS + Galileo + BeiDou + QZSS L1+L2 (the
-    larger configuration of `augnet bench rtk`); None without the data or rnx2rtkp."""
-    from augnet.bench import rtk
-
-    exe = shutil.which("rnx2rtkp")
-    if exe is None or not rtk.DATA.is_dir():
-        return None
-    return 1e3 * rtk.run_rtklib(exe, rtk.CONFIGS[-1][1])["per_epoch_s"]
 
 
 # Run in a child with another tree first on sys.path: that tree's NetworkSolver on this file's worlds.
