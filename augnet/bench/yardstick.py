@@ -3,13 +3,9 @@
 
 from __future__ import annotations
 
-import os
 import shutil
-from pathlib import Path
 
 YARDSTICK_KEY = "yardstick_rnx2rtkp_ms_per_epoch"
-# Where an RTKLIB source tree would be found for the MSM7 encoder harness (issue 17); none is installed yet.
-RTKLIB_SRC_ENV = "AUGNET_RTKLIB_SRC"
 
 
 def yardstick_ms() -> float | None:
@@ -39,13 +35,3 @@ def describe(yard_ms: float | None) -> str:
         return "  no yardstick: rnx2rtkp or ../shared/data/rinex/static-1m-2024 absent"
     return (f"  yardstick: RTKLIB rnx2rtkp {yard_ms:.3f} ms per epoch on static-1m-2024 (GECJ L1+L2); "
             "'_yardsticks' = figure / yardstick")
-
-
-def rtklib_source() -> Path | None:
-    """An RTKLIB source tree (src/rtcm3e.c present) for the MSM7 encoder harness, from $AUGNET_RTKLIB_SRC or
-    /usr/src; None when absent (the bench then says so)."""
-    candidates = [os.environ.get(RTKLIB_SRC_ENV, "")] + [str(p) for p in Path("/usr/src").glob("rtklib*")]
-    for c in candidates:
-        if c and (Path(c) / "src" / "rtcm3e.c").is_file():
-            return Path(c)
-    return None
