@@ -108,3 +108,45 @@ def test_service_command_is_a_real_cli_command(compose, name, monkeypatch):
     result = CliRunner().invoke(cli.app, [*svc["command"], "--help"])
     assert result.exit_code == 0, result.output
     assert "AUGNET_DB_URL" in result.output and "AUGNET_BUS_URL" in result.output
+
+
+NATS_NODES = ("nats", "nats-2", "nats-3")  # issue 17: 3 JetStream nodes for R3 streams
+
+
+def test_every_service_has_a_healthcheck_and_restart_policy(compose):
+    for name, svc in compose["services"].items():
+        assert svc.get("restart") in {"always", "unless-stopped", "on-failure"}, name
+        assert svc.get("healthcheck", {}).get("test"), f"{name} has no healthcheck"
+
+
+def test_three_nats_nodes_form_one_jetstream_cluster(compose):
+    services = compose["services"]
+    for name in NATS_NODES:
+        cmd = services[name]["command"]
+        assert "-js" in cmd and cmd[cmd.index("--name") + 1] == name
+        routes = {urlparse(u).hostname for u in cmd[cmd.index("--routes") + 1].split(",")}
+        assert routes == set(NATS_NODES) - {name}, f"{name} routes to {routes}"
+        assert cmd[cmd.index("--cluster_name") + 1] == "augnet"
+    data = [services[n]["volumes"][0].split(":")[0] for n in NATS_NODES]
+    assert len(set(data)) == 3, "each JetStream node needs its own store"
+
+
+def test_national_layout_two_centres_per_region_three_casters(compose):
+    services = compose["services"]
+    national = {n: s for n, s in services.items() if "national" in s.get("profiles", [])}
+    regions: dict[str, int] = {}
+    for svc in national.values():
+        if svc["command"][:2] == ["node", "centre"]:
+            region = svc["command"][svc["command"].index("--region") + 1]
+            regions[region] = regions.get(region, 0) + 1
+    assert len(regions) >= 2 and all(n == 2 for n in regions.values()), regions
+    casters = [s for s in national.values() if s["command"][:2] == ["node", "caster"]]
+    assert len(casters) == 3
+    for name, svc in national.items():
+        assert svc["build"] == "." and set(svc["depends_on"]) >= {"postgres", *NATS_NODES}, name
+
+
+def test_single_node_services_run_without_a_profile(compose):
+    """`docker compose up` without --profile keeps the runnable one-process system."""
+    default = {n for n, s in compose["services"].items() if not s.get("profiles")}
+    assert default == REQUIRED_SERVICES | {"nats-2", "nats-3"}
