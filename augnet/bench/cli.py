@@ -3,10 +3,15 @@ measures ours and the named peer side by side in one run and prints figures and 
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import inspect
+import io
+import json
 
 import typer
+
+from augnet.bench import yardstick
 
 BENCHMARKS = {
     "rtcm": ("augnet.bench.rtcm", "RTCM 3 codec: decode/encode against pyrtcm, batch MSM7 encoder."),
@@ -25,12 +30,45 @@ QUICK = ("rtcm", "rssp1", "sim")
 app = typer.Typer(no_args_is_help=True, help="Benchmarks against named peers.")
 
 
-def _run(name: str, argv: list[str] | None = None) -> None:
-    module = importlib.import_module(BENCHMARKS[name][0])
+# These measure the yardstick themselves (before/after the run, in their own JSON and table).
+OWN_YARDSTICK = ("centre", "rtcm")
+
+
+def _call(module, argv: list[str]) -> None:
     if inspect.signature(module.main).parameters:
-        module.main(argv or [])
+        module.main(argv)
     else:
         module.main()
+
+
+def _run(name: str, argv: list[str] | None = None) -> None:
+    """Run one benchmark with the machine yardstick of the same run (issue 17): added to its JSON, printed
+    after its table."""
+    argv = list(argv or [])
+    module = importlib.import_module(BENCHMARKS[name][0])
+    if name in OWN_YARDSTICK:
+        _call(module, argv)
+        return
+    yard = yardstick.yardstick_ms()
+    if "--json" not in argv and name != "caster":  # caster always prints JSON
+        _call(module, argv)
+        print(yardstick.describe(yard), flush=True)
+        return
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        _call(module, argv)
+    text = buf.getvalue()
+    try:
+        result = json.loads(text)
+    except ValueError:  # not one JSON document: keep it as printed, state the yardstick after it
+        print(text, end="")
+        print(yardstick.describe(yard), flush=True)
+        return
+    if isinstance(result, dict):
+        result = yardstick.annotate(result, yard)
+    else:
+        result = {"results": result, yardstick.YARDSTICK_KEY: None if yard is None else round(yard, 3)}
+    print(json.dumps(result, indent=2), flush=True)
 
 
 def run_all() -> None:
